@@ -1,0 +1,62 @@
+# InterMask framework: every target that needs Python depends on `install`, so a fresh clone
+# needs nothing but `make <target>`.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-from-lock
+UV_VERSION := 0.13.8
+
+DATA ?= synthetic
+CLIPS ?= 1000
+SEED ?= 0
+ARGS ?=
+DATA_DIR ?= data
+
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats clean
+
+help: ## list the targets
+	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
+
+install: $(STAMP) ## create .venv from uv.lock (fast no-op when up to date)
+
+$(STAMP): pyproject.toml uv.lock
+	@command -v uv >/dev/null 2>&1 || python3 -m uv --version >/dev/null 2>&1 \
+		|| python3 -m pip install --quiet "uv==$(UV_VERSION)"
+	@uv_cmd=$$(command -v uv || echo "python3 -m uv"); $$uv_cmd sync --frozen
+	@touch $@
+
+test: install ## fast test suite (no `slow`, no `gpu`)
+	$(VENV)/bin/pytest $(ARGS)
+
+test-slow: install ## only the slow tests (training runs, 1000-clip synthesis)
+	$(VENV)/bin/pytest -m slow $(ARGS)
+
+test-gpu: install ## GPU tests (skip without CUDA)
+	$(VENV)/bin/pytest -m gpu $(ARGS)
+
+test-all: install ## every test
+	$(VENV)/bin/pytest -m "" $(ARGS)
+
+lint: install ## ruff lint + format check
+	$(VENV)/bin/ruff check intermask callbacks tests
+	$(VENV)/bin/ruff format --check intermask callbacks tests
+
+format: install ## apply ruff fixes and formatting
+	$(VENV)/bin/ruff check --fix intermask callbacks tests
+	$(VENV)/bin/ruff format intermask callbacks tests
+
+data: install ## write the embedded synthetic datasets (InterHuman and Inter-X layouts) under data/synthetic/
+	$(VENV)/bin/intermask data synth --out $(DATA_DIR)/synthetic/interhuman --format interhuman --clips $(CLIPS) --seed $(SEED)
+	$(VENV)/bin/intermask data synth --out $(DATA_DIR)/synthetic/interx --format interx --clips $(CLIPS) --seed $(SEED)
+
+data-check: install ## validate a dataset folder: make data-check ROOT=data/InterHuman
+	$(VENV)/bin/intermask data check $(or $(ROOT),$(DATA_DIR)/synthetic/interhuman)
+
+data-stats: install ## compute normalization statistics: make data-stats ROOT=data/InterHuman
+	$(VENV)/bin/intermask data stats $(or $(ROOT),$(DATA_DIR)/synthetic/interhuman)
+
+clean: ## remove caches and run outputs (keeps .venv and data/)
+	rm -rf .pytest_cache .ruff_cache outputs multirun lightning_logs
+	find . -name __pycache__ -type d -prune -not -path './.venv/*' -exec rm -rf {} +

@@ -1,0 +1,148 @@
+"""Encoder and decoder of the 2D-token motion VQ-VAE (InterMask section 3.1, appendix C.1).
+
+A person's motion is an image ``(B, C, J, T)``: joints are the height, frames the width, the
+per-joint features the channels. Two strided convolutions reduce joints to 5 body-part rows and
+time by 4, giving a ``(B, D, 5, T/4)`` latent grid. With ``token_layout="1d"`` (the Table 2
+ablation) joints are folded into channels and only time is convolved, giving ``(B, D, 1, T/4)``.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import torch
+from einops import rearrange
+from torch import nn
+
+TokenLayout = Literal["2d", "1d"]
+
+
+def _conv(layout: TokenLayout, in_channels: int, out_channels: int, kernel: tuple[int, int],
+          stride: tuple[int, int] = (1, 1), padding: tuple[int, int] = (1, 1),
+          dilation: tuple[int, int] = (1, 1)) -> nn.Module:
+    """A Conv2d over (joints, time), or its Conv1d restriction to time for the 1D layout."""
+    if layout == "2d":
+        return nn.Conv2d(in_channels, out_channels, kernel, stride, padding, dilation)
+    return nn.Conv1d(in_channels, out_channels, kernel[1], stride[1], padding[1], dilation[1])
+
+
+class ResidualBlock(nn.Module):
+    """Pre-activation residual unit: x + Dropout(Conv1x1(ReLU(Conv3x3_dilated(ReLU(x)))))."""
+
+    def __init__(self, *, width: int, dilation: int, dropout: float, layout: TokenLayout) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.ReLU(),
+            _conv(layout, width, width, (3, 3), padding=(dilation, dilation), dilation=(dilation, dilation)),
+            nn.ReLU(),
+            _conv(layout, width, width, (1, 1), padding=(0, 0)),
+            nn.Dropout(dropout),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.body(x)
+
+
+def residual_stack(*, width: int, dilations: tuple[int, ...], dropout: float, layout: TokenLayout) -> nn.Sequential:
+    return nn.Sequential(*(ResidualBlock(width=width, dilation=d, dropout=dropout, layout=layout) for d in dilations))
+
+
+def _to_grid(x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
+    """(B, T, J, C) features -> the convolution input, (B, C, J, T) or (B, J*C, T)."""
+    if layout == "2d":
+        return rearrange(x, "b t j c -> b c j t")
+    return rearrange(x, "b t j c -> b (j c) t")
+
+
+class MotionEncoder(nn.Module):
+    """(B, T, J, C) per-joint features -> (B, D, rows, T/4) latent grid (rows = 5, or 1 for "1d")."""
+
+    def __init__(
+        self,
+        *,
+        num_joints: int,
+        in_channels: int,
+        width: int = 512,
+        joint_kernel: int = 4,
+        joint_stride: int = 2,
+        dilations: tuple[int, ...] = (3, 1),
+        dropout: float = 0.2,
+        layout: TokenLayout = "2d",
+    ) -> None:
+        super().__init__()
+        self.layout = layout
+        stem_in = in_channels if layout == "2d" else num_joints * in_channels
+        downsample = [
+            layer
+            for _ in range(2)
+            for layer in (
+                _conv(layout, width, width, (joint_kernel, 4), stride=(joint_stride, 2)),
+                residual_stack(width=width, dilations=tuple(dilations), dropout=dropout, layout=layout),
+            )
+        ]
+        self.net = nn.Sequential(
+            _conv(layout, stem_in, width, (3, 3)),
+            nn.ReLU(),
+            *downsample,
+            _conv(layout, width, width, (3, 3)),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        latent = self.net(_to_grid(x, self.layout))
+        return latent if self.layout == "2d" else latent[:, :, None, :]
+
+
+class MotionDecoder(nn.Module):
+    """(B, D, rows, T') latent grid -> (B, 4 T', J, C) per-joint features.
+
+    Each stage upsamples by nearest neighbour with (joint_scale[i], 2) and convolves; the joint
+    scales (InterHuman 2.2, 2 -> 5, 11, 22; Inter-X 3.5, 3.3 -> 5, 17, 56) come from the
+    reference implementation and are checked against ``num_joints`` at construction.
+    """
+
+    def __init__(
+        self,
+        *,
+        num_joints: int,
+        out_channels: int,
+        width: int = 512,
+        joint_scales: tuple[float, float] = (2.2, 2.0),
+        latent_rows: int = 5,
+        dilations: tuple[int, ...] = (3, 1),
+        dropout: float = 0.2,
+        layout: TokenLayout = "2d",
+    ) -> None:
+        super().__init__()
+        self.layout, self.num_joints, self.out_channels = layout, num_joints, out_channels
+        if layout == "2d":
+            rows = latent_rows
+            for scale in joint_scales:
+                rows = int(rows * scale)
+            if rows != num_joints:
+                raise ValueError(
+                    f"joint_scales {tuple(joint_scales)} take {latent_rows} latent rows to {rows} joints, "
+                    f"expected {num_joints}"
+                )
+        stages = []
+        for scale in joint_scales:
+            time_only = layout == "1d"
+            stages += [
+                residual_stack(width=width, dilations=tuple(reversed(dilations)), dropout=dropout, layout=layout),
+                nn.Upsample(scale_factor=2.0 if time_only else (float(scale), 2.0), mode="nearest"),
+                _conv(layout, width, width, (3, 3)),
+            ]
+        head_out = out_channels if layout == "2d" else num_joints * out_channels
+        self.net = nn.Sequential(
+            _conv(layout, width, width, (3, 3)),
+            nn.ReLU(),
+            *stages,
+            _conv(layout, width, width, (3, 3)),
+            nn.ReLU(),
+            _conv(layout, width, head_out, (3, 3)),
+        )
+
+    def forward(self, latent: torch.Tensor) -> torch.Tensor:
+        if self.layout == "2d":
+            return rearrange(self.net(latent), "b c j t -> b t j c")
+        out = self.net(latent[:, :, 0, :])
+        return rearrange(out, "b (j c) t -> b t j c", j=self.num_joints)

@@ -1,0 +1,220 @@
+"""Vector quantizers: an EMA codebook with dead-code reset, and MoMask's residual stack of them.
+
+Inputs are latent grids ``(B, D, H, W)`` (D latent width, H rows, W token steps); indices come
+back as ``(B, H, W)`` per layer. Codebooks are buffers updated by exponential moving averages
+(van den Oord et al. 2017, appendix), never by the optimizer.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+import torch.distributed as dist
+import torch.nn.functional as F
+from einops import rearrange
+from torch import nn
+
+
+class QuantizerOutput(NamedTuple):
+    quantized: torch.Tensor  # (B, D, H, W), straight-through: gradients flow to the encoder output
+    indices: torch.Tensor  # (B, H, W) int64
+    commit_loss: torch.Tensor  # () MSE(x, sg(q)), unweighted
+    perplexity: torch.Tensor  # () exp(entropy) of this batch's code histogram
+    dead_codes: torch.Tensor  # () codes whose EMA count is below the reset threshold (before reset)
+
+
+class ResidualQuantizerOutput(NamedTuple):
+    quantized: torch.Tensor  # (B, D, H, W), sum of the kept layers, straight-through
+    indices: torch.Tensor  # (B, Q, H, W) int64; -1 for layers removed by quantization dropout
+    commit_loss: torch.Tensor  # () mean over kept layers (same scale as a single VQ)
+    perplexity: torch.Tensor  # (Q,) per layer (0 for dropped layers)
+    dead_codes: torch.Tensor  # (Q,) per layer
+
+
+def _all_reduce_sum(tensor: torch.Tensor) -> torch.Tensor:
+    """Sum across DDP ranks so every replica applies the same codebook update."""
+    if dist.is_available() and dist.is_initialized():
+        dist.all_reduce(tensor)
+    return tensor
+
+
+def _perplexity(indices: torch.Tensor, codebook_size: int) -> torch.Tensor:
+    counts = torch.bincount(indices.flatten(), minlength=codebook_size).float()
+    probabilities = counts / counts.sum().clamp_min(1.0)
+    return torch.exp(-(probabilities * torch.log(probabilities.clamp_min(1e-10))).sum())
+
+
+class EMAQuantizer(nn.Module):
+    """Nearest-code quantizer with an EMA-updated codebook.
+
+    Args:
+        codebook_size: K codes.
+        dim: D, code width.
+        decay: EMA decay of code counts and sums (paper: 0.99).
+        reset_threshold: codes whose EMA count falls below it are re-initialised from random
+            encoder outputs of the current batch (reference: 1.0).
+        stochastic_temperature: when set, training picks codes by Gumbel-max sampling of
+            -distance / temperature (the reference's choice, 0.5) instead of the nearest code;
+            evaluation always uses the nearest code.
+        eps: Laplace smoothing of the counts.
+    """
+
+    def __init__(
+        self,
+        *,
+        codebook_size: int = 1024,
+        dim: int = 512,
+        decay: float = 0.99,
+        reset_threshold: float = 1.0,
+        stochastic_temperature: float | None = None,
+        eps: float = 1e-5,
+    ) -> None:
+        super().__init__()
+        if not 0.0 < decay < 1.0:
+            raise ValueError(f"decay must be in (0, 1), got {decay}")
+        if stochastic_temperature is not None and stochastic_temperature <= 0:
+            raise ValueError(f"stochastic_temperature must be positive or None, got {stochastic_temperature}")
+        self.codebook_size, self.dim, self.decay = codebook_size, dim, decay
+        self.reset_threshold, self.stochastic_temperature, self.eps = reset_threshold, stochastic_temperature, eps
+        self.register_buffer("codebook", torch.zeros(codebook_size, dim))
+        self.register_buffer("ema_count", torch.zeros(codebook_size))
+        self.register_buffer("ema_sum", torch.zeros(codebook_size, dim))
+        self.register_buffer("initialized", torch.tensor(False))
+
+    def forward(self, x: torch.Tensor) -> QuantizerOutput:
+        """(B, D, H, W) -> QuantizerOutput; updates the codebook in training mode."""
+        batch, _, height, width = x.shape
+        flat = rearrange(x, "b d h w -> (b h w) d")
+        if self.training and not bool(self.initialized):
+            self._initialise(flat.detach())
+        indices = self._assign(flat.detach())
+        dead = (self.ema_count < self.reset_threshold).sum()
+        if self.training:
+            self._ema_update(flat.detach().float(), indices)
+        quantized_flat = F.embedding(indices, self.codebook).to(flat.dtype)
+        commit_loss = F.mse_loss(flat, quantized_flat.detach())
+        quantized_flat = flat + (quantized_flat - flat).detach()
+        quantized = rearrange(quantized_flat, "(b h w) d -> b d h w", b=batch, h=height, w=width)
+        indices = rearrange(indices, "(b h w) -> b h w", b=batch, h=height, w=width)
+        return QuantizerOutput(quantized, indices, commit_loss, _perplexity(indices, self.codebook_size), dead)
+
+    def lookup(self, indices: torch.Tensor) -> torch.Tensor:
+        """(B, H, W) code indices -> (B, D, H, W) code vectors."""
+        return rearrange(F.embedding(indices, self.codebook), "b h w d -> b d h w")
+
+    @torch.no_grad()
+    def _assign(self, flat: torch.Tensor) -> torch.Tensor:
+        codebook = self.codebook.to(flat.dtype)
+        distances = (
+            flat.pow(2).sum(-1, keepdim=True) - 2 * flat @ codebook.T + codebook.pow(2).sum(-1)[None]
+        )  # (N, K)
+        if self.training and self.stochastic_temperature is not None:
+            gumbel = -torch.log(-torch.log(torch.rand_like(distances).clamp_min(1e-10)).clamp_min(1e-10))
+            return torch.argmax(-distances / self.stochastic_temperature + gumbel, dim=-1)
+        return torch.argmin(distances, dim=-1)
+
+    @torch.no_grad()
+    def _random_rows(self, flat: torch.Tensor, count: int) -> torch.Tensor:
+        """``count`` encoder outputs drawn at random (with repetition only when the batch is small)."""
+        if flat.shape[0] >= count:
+            return flat[torch.randperm(flat.shape[0], device=flat.device)[:count]]
+        return flat[torch.randint(flat.shape[0], (count,), device=flat.device)]
+
+    @torch.no_grad()
+    def _initialise(self, flat: torch.Tensor) -> None:
+        rows = self._random_rows(flat.float(), self.codebook_size)
+        if dist.is_available() and dist.is_initialized():
+            dist.broadcast(rows, src=0)  # every rank starts from rank 0's codebook
+        self.codebook.copy_(rows)
+        self.ema_sum.copy_(rows)
+        self.ema_count.fill_(1.0)
+        self.initialized.fill_(True)
+
+    @torch.no_grad()
+    def _ema_update(self, flat: torch.Tensor, indices: torch.Tensor) -> None:
+        counts = _all_reduce_sum(torch.bincount(indices, minlength=self.codebook_size).float())
+        sums = _all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
+        self.ema_count.mul_(self.decay).add_(counts, alpha=1 - self.decay)
+        self.ema_sum.mul_(self.decay).add_(sums, alpha=1 - self.decay)
+        total = self.ema_count.sum()
+        smoothed = (self.ema_count + self.eps) / (total + self.codebook_size * self.eps) * total
+        self.codebook.copy_(self.ema_sum / smoothed[:, None])
+        dead = self.ema_count < self.reset_threshold
+        if dead.any():
+            replacement = self._random_rows(flat, self.codebook_size)
+            if dist.is_available() and dist.is_initialized():
+                dist.broadcast(replacement, src=0)
+            self.codebook[dead] = replacement[dead]
+            self.ema_sum[dead] = replacement[dead]
+            self.ema_count[dead] = 1.0
+
+
+class ResidualQuantizer(nn.Module):
+    """MoMask residual VQ: layer q quantizes what layers 0..q-1 left; the latent is their sum.
+
+    ``num_quantizers=1`` is the plain VQ. With probability ``dropout_prob`` a training batch keeps
+    only layers 0..k for a random k (layer 0 always kept), so coarse layers learn to stand alone.
+    """
+
+    def __init__(
+        self,
+        *,
+        num_quantizers: int = 1,
+        codebook_size: int = 1024,
+        dim: int = 512,
+        dropout_prob: float = 0.0,
+        decay: float = 0.99,
+        reset_threshold: float = 1.0,
+        stochastic_temperature: float | None = None,
+    ) -> None:
+        super().__init__()
+        if num_quantizers < 1:
+            raise ValueError(f"num_quantizers must be >= 1, got {num_quantizers}")
+        if not 0.0 <= dropout_prob <= 1.0:
+            raise ValueError(f"dropout_prob must be in [0, 1], got {dropout_prob}")
+        self.dropout_prob = dropout_prob
+        self.layers = nn.ModuleList(
+            EMAQuantizer(codebook_size=codebook_size, dim=dim, decay=decay, reset_threshold=reset_threshold,
+                         stochastic_temperature=stochastic_temperature)
+            for _ in range(num_quantizers)
+        )
+
+    @property
+    def num_quantizers(self) -> int:
+        return len(self.layers)
+
+    def forward(self, x: torch.Tensor, active_layers: int | None = None) -> ResidualQuantizerOutput:
+        """(B, D, H, W) -> ResidualQuantizerOutput. ``active_layers`` forces the number of layers used."""
+        kept = active_layers or self.num_quantizers
+        if active_layers is None and self.training and self.num_quantizers > 1 and self.dropout_prob > 0:
+            if torch.rand(()) < self.dropout_prob:
+                kept = int(torch.randint(1, self.num_quantizers + 1, ()))
+        residual, quantized = x, torch.zeros_like(x)
+        batch, _, height, width = x.shape
+        indices = x.new_full((batch, self.num_quantizers, height, width), -1, dtype=torch.long)
+        commit = x.new_zeros(())
+        perplexity = x.new_zeros(self.num_quantizers)
+        dead = torch.zeros(self.num_quantizers, dtype=torch.long, device=x.device)
+        for layer_index, layer in enumerate(self.layers[:kept]):
+            out = layer(residual)
+            # quantize the residual, but let the straight-through gradient reach x unchanged
+            quantized = quantized + out.quantized
+            residual = residual - out.quantized.detach()
+            indices[:, layer_index] = out.indices
+            commit = commit + out.commit_loss
+            perplexity[layer_index], dead[layer_index] = out.perplexity, out.dead_codes
+        quantized = x + (quantized - x).detach()
+        return ResidualQuantizerOutput(quantized, indices, commit / kept, perplexity, dead)
+
+    def lookup(self, indices: torch.Tensor) -> torch.Tensor:
+        """(B, Q', H, W) indices of the first Q' <= Q layers (-1 = unused) -> (B, D, H, W) summed codes."""
+        if indices.shape[1] > self.num_quantizers:
+            raise ValueError(f"indices have {indices.shape[1]} layers, the quantizer has {self.num_quantizers}")
+        total = None
+        for layer_index in range(indices.shape[1]):
+            layer_indices = indices[:, layer_index]
+            codes = self.layers[layer_index].lookup(layer_indices.clamp_min(0))
+            codes = codes * (layer_indices >= 0)[:, None].to(codes.dtype)
+            total = codes if total is None else total + codes
+        return total

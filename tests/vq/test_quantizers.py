@@ -1,0 +1,103 @@
+import pytest
+import torch
+
+from intermask.vq.quantizers import EMAQuantizer, ResidualQuantizer
+
+
+def test_first_training_batch_initialises_the_codebook_from_encoder_outputs():
+    torch.manual_seed(0)
+    quantizer = EMAQuantizer(codebook_size=8, dim=4).train()
+    x = torch.randn(2, 4, 2, 3)  # 12 vectors
+    out = quantizer(x)
+    vectors = x.permute(0, 2, 3, 1).reshape(-1, 4)
+    # every code is one of the batch's vectors, nudged by one EMA step toward its assigned mean
+    assert bool(quantizer.initialized)
+    assert out.indices.shape == (2, 2, 3) and out.quantized.shape == x.shape
+    distances = torch.cdist(quantizer.codebook, vectors).min(dim=1).values
+    assert distances.max() < 1.0
+
+
+def test_ema_update_moves_codes_toward_the_mean_of_their_vectors():
+    quantizer = EMAQuantizer(codebook_size=2, dim=2, decay=0.5, reset_threshold=0.0).train()
+    quantizer.codebook.copy_(torch.tensor([[0.0, 0.0], [10.0, 10.0]]))
+    quantizer.ema_sum.copy_(quantizer.codebook)
+    quantizer.ema_count.fill_(1.0)
+    quantizer.initialized.fill_(True)
+    x = torch.tensor([[1.0, 1.0], [3.0, 3.0], [9.0, 9.0]]).T.reshape(1, 2, 1, 3)
+    quantizer(x)
+    # code 0: count 0.5*1 + 0.5*2 = 1.5, sum 0.5*0 + 0.5*(4, 4) = (2, 2)
+    # code 1: count 0.5*1 + 0.5*1 = 1.0, sum 0.5*(10, 10) + 0.5*(9, 9) = (9.5, 9.5)
+    torch.testing.assert_close(quantizer.ema_count, torch.tensor([1.5, 1.0]))
+    torch.testing.assert_close(quantizer.codebook, torch.tensor([[2 / 1.5, 2 / 1.5], [9.5, 9.5]]), atol=1e-4, rtol=0)
+
+
+def test_dead_codes_are_reset_to_current_encoder_outputs():
+    quantizer = EMAQuantizer(codebook_size=3, dim=2, decay=0.9, reset_threshold=1.0).train()
+    quantizer.codebook.copy_(torch.tensor([[0.0, 0.0], [100.0, 100.0], [-100.0, 100.0]]))
+    quantizer.ema_sum.copy_(quantizer.codebook)
+    quantizer.ema_count.fill_(1.0)
+    quantizer.initialized.fill_(True)
+    x = torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1]]).T.reshape(1, 2, 1, 4)
+    out = quantizer(x)
+    assert out.dead_codes == 0  # counts were 1.0 before this batch
+    # codes 1 and 2 got nothing: count 0.9 < 1 -> replaced by batch vectors, count back to 1
+    vectors = x.permute(0, 2, 3, 1).reshape(-1, 2)
+    for code in (1, 2):
+        assert torch.isclose(torch.cdist(quantizer.codebook[code : code + 1], vectors), torch.tensor(0.0)).any()
+    torch.testing.assert_close(quantizer.ema_count[1:], torch.ones(2))
+
+
+def test_eval_mode_picks_the_nearest_code_and_leaves_the_codebook_alone():
+    quantizer = EMAQuantizer(codebook_size=2, dim=1, stochastic_temperature=0.5).eval()
+    quantizer.codebook.copy_(torch.tensor([[0.0], [1.0]]))
+    before = quantizer.codebook.clone()
+    out = quantizer(torch.tensor([0.2, 0.9, 0.6, -3.0]).reshape(1, 1, 1, 4))
+    assert out.indices.flatten().tolist() == [0, 1, 1, 0]
+    assert torch.equal(quantizer.codebook, before)
+
+
+def test_straight_through_gradient_reaches_the_encoder_output():
+    quantizer = ResidualQuantizer(num_quantizers=3, codebook_size=16, dim=4).train()
+    x = torch.randn(2, 4, 5, 4, requires_grad=True)
+    out = quantizer(x)
+    (out.quantized * torch.arange(4.0).reshape(1, 4, 1, 1)).sum().backward()
+    torch.testing.assert_close(x.grad, torch.arange(4.0).reshape(1, 4, 1, 1).expand_as(x))
+
+
+def test_six_residual_layers_reconstruct_better_than_one():
+    torch.manual_seed(0)
+    x = torch.randn(16, 32, 5, 8)
+    errors = {}
+    for layers in (1, 6):
+        quantizer = ResidualQuantizer(num_quantizers=layers, codebook_size=64, dim=32).train()
+        for _ in range(10):
+            quantizer(x)
+        out = quantizer.eval()(x)
+        errors[layers] = (out.quantized - x).pow(2).mean().item()
+        torch.testing.assert_close(quantizer.lookup(out.indices), out.quantized)
+    assert errors[6] < 0.5 * errors[1]
+
+
+def test_quantization_dropout_keeps_a_prefix_of_layers():
+    torch.manual_seed(3)
+    quantizer = ResidualQuantizer(num_quantizers=4, codebook_size=8, dim=4, dropout_prob=1.0).train()
+    kept_counts = set()
+    for _ in range(20):
+        indices = quantizer(torch.randn(2, 4, 1, 4)).indices
+        used = (indices[:, :, 0, 0] >= 0)[0]
+        kept = int(used.sum())
+        assert used[:kept].all() and not used[kept:].any()  # a prefix, layer 0 always kept
+        kept_counts.add(kept)
+    assert kept_counts > {1} and len(kept_counts) >= 3
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(decay=1.0), r"decay must be in \(0, 1\), got 1.0"),
+        (dict(stochastic_temperature=0.0), "stochastic_temperature must be positive or None, got 0.0"),
+    ],
+)
+def test_invalid_options_are_rejected(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        EMAQuantizer(codebook_size=4, dim=2, **kwargs)
