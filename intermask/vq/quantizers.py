@@ -99,16 +99,26 @@ class EMAQuantizer(nn.Module):
         indices = rearrange(indices, "(b h w) -> b h w", b=batch, h=height, w=width)
         return QuantizerOutput(quantized, indices, commit_loss, _perplexity(indices, self.codebook_size), dead)
 
+    @torch.no_grad()
+    def nearest(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, D, H, W) -> (B, H, W) nearest-code indices; never updates the codebook."""
+        batch, _, height, width = x.shape
+        flat = rearrange(x, "b d h w -> (b h w) d")
+        return rearrange(self._distances(flat).argmin(dim=-1), "(b h w) -> b h w", b=batch, h=height, w=width)
+
     def lookup(self, indices: torch.Tensor) -> torch.Tensor:
         """(B, H, W) code indices -> (B, D, H, W) code vectors."""
         return rearrange(F.embedding(indices, self.codebook), "b h w d -> b d h w")
 
+    def _distances(self, flat: torch.Tensor) -> torch.Tensor:
+        """(N, D) -> (N, K) squared Euclidean distances to every code."""
+        codebook = self.codebook.to(flat.dtype)
+        return flat.pow(2).sum(-1, keepdim=True) - 2 * flat @ codebook.T + codebook.pow(2).sum(-1)[None]
+
     @torch.no_grad()
     def _assign(self, flat: torch.Tensor) -> torch.Tensor:
-        codebook = self.codebook.to(flat.dtype)
-        distances = (
-            flat.pow(2).sum(-1, keepdim=True) - 2 * flat @ codebook.T + codebook.pow(2).sum(-1)[None]
-        )  # (N, K)
+        """(N, D) -> (N,) code indices: Gumbel-max sampling in training when configured, else nearest."""
+        distances = self._distances(flat)
         if self.training and self.stochastic_temperature is not None:
             gumbel = -torch.log(-torch.log(torch.rand_like(distances).clamp_min(1e-10)).clamp_min(1e-10))
             return torch.argmax(-distances / self.stochastic_temperature + gumbel, dim=-1)
@@ -206,6 +216,16 @@ class ResidualQuantizer(nn.Module):
             perplexity[layer_index], dead[layer_index] = out.perplexity, out.dead_codes
         quantized = x + (quantized - x).detach()
         return ResidualQuantizerOutput(quantized, indices, commit / kept, perplexity, dead)
+
+    @torch.no_grad()
+    def encode(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, D, H, W) -> (B, Q, H, W) nearest-code indices of every layer; no codebook update."""
+        residual, indices = x, []
+        for layer in self.layers:
+            layer_indices = layer.nearest(residual)
+            residual = residual - layer.lookup(layer_indices).to(residual.dtype)
+            indices.append(layer_indices)
+        return torch.stack(indices, dim=1)
 
     def lookup(self, indices: torch.Tensor) -> torch.Tensor:
         """(B, Q', H, W) indices of the first Q' <= Q layers (-1 = unused) -> (B, D, H, W) summed codes."""

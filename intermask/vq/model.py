@@ -1,0 +1,57 @@
+"""The motion VQ-VAE network: view -> encoder -> (residual) quantizer -> decoder -> view."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+from intermask.vq.convolutions import MotionDecoder, MotionEncoder
+from intermask.vq.quantizers import ResidualQuantizer
+
+
+class VQVAEOutput(NamedTuple):
+    reconstruction: torch.Tensor  # (B, T, *F) normalized features
+    indices: torch.Tensor  # (B, Q, rows, T/4)
+    commit_loss: torch.Tensor  # ()
+    perplexity: torch.Tensor  # (Q,)
+    dead_codes: torch.Tensor  # (Q,)
+
+
+class MotionVQVAE(nn.Module):
+    """Tokenizes one person's motion into a (rows, T/4) grid of codes per quantizer layer.
+
+    ``view`` adapts the dataset features (see :mod:`intermask.vq.views`); time must be a multiple
+    of 4 (the two stride-2 stages).
+    """
+
+    def __init__(self, *, view: nn.Module, encoder: MotionEncoder, quantizer: ResidualQuantizer,
+                 decoder: MotionDecoder) -> None:
+        super().__init__()
+        self.view, self.encoder, self.quantizer, self.decoder = view, encoder, quantizer, decoder
+
+    @staticmethod
+    def _check_frames(frames: int) -> None:
+        if frames % 4:
+            raise ValueError(f"the VQ-VAE needs a multiple of 4 frames, got {frames}")
+
+    def forward(self, features: torch.Tensor) -> VQVAEOutput:
+        """(B, T, *F) normalized features -> reconstruction and quantizer statistics."""
+        self._check_frames(features.shape[1])
+        latent = self.encoder(self.view.to_joints(features))
+        quantized = self.quantizer(latent)
+        reconstruction = self.view.from_joints(self.decoder(quantized.quantized))
+        return VQVAEOutput(reconstruction, quantized.indices, quantized.commit_loss, quantized.perplexity,
+                           quantized.dead_codes)
+
+    @torch.no_grad()
+    def encode(self, features: torch.Tensor) -> torch.Tensor:
+        """(B, T, *F) normalized features -> (B, Q, rows, T/4) code indices (nearest codes)."""
+        self._check_frames(features.shape[1])
+        latent = self.encoder(self.view.to_joints(features))
+        return self.quantizer.encode(latent)
+
+    def decode(self, indices: torch.Tensor) -> torch.Tensor:
+        """(B, Q', rows, T') indices (Q' <= Q layers, -1 = unused) -> (B, 4 T', *F) normalized features."""
+        return self.view.from_joints(self.decoder(self.quantizer.lookup(indices)))

@@ -1,0 +1,108 @@
+"""How each dataset's features enter and leave the VQ-VAE, and where their geometry lives.
+
+A *view* turns a person's dataset features into the per-joint image the convolutions see,
+``(B, T, J, C)``, turns the decoder output back, and exposes the de-normalized geometry
+(positions, 6D rotations, foot contacts) the geometric losses and MPJPE need. The
+normalization statistics are buffers, so checkpoints carry them.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+from intermask.motion import interhuman as ih
+from intermask.motion import interx as ix
+from intermask.motion.skeleton import NUM_JOINTS
+
+
+class Geometry(NamedTuple):
+    positions: torch.Tensor | None  # (B, T, 22, 3) metres, None when the representation has no positions
+    rot6d: torch.Tensor  # (B, T, R, 6) local rotations in the "rows" 6D layout
+    contacts: torch.Tensor | None  # (B, T, 4) in {0, 1} (l_ankle, l_foot, r_ankle, r_foot) or None
+
+
+class InterHumanView(nn.Module):
+    """Normalized (B, T, 262) features <-> (B, T, 22, 12) [pos, vel, rot6d] per joint."""
+
+    num_joints = NUM_JOINTS
+    channels = ih.JOINT_VIEW_CHANNELS
+    feature_shape = (ih.FEATURE_DIM,)
+
+    def __init__(self, *, mean: torch.Tensor, std: torch.Tensor) -> None:
+        super().__init__()
+        mean, std = torch.as_tensor(mean, dtype=torch.float32), torch.as_tensor(std, dtype=torch.float32)
+        if mean.shape != self.feature_shape or std.shape != self.feature_shape:
+            raise ValueError(f"InterHuman statistics must have shape (262,), got {tuple(mean.shape)} and {tuple(std.shape)}")
+        self.register_buffer("mean", mean)
+        self.register_buffer("std", std)
+
+    def to_joints(self, features: torch.Tensor) -> torch.Tensor:
+        """(B, T, 262) normalized -> (B, T, 22, 12); the root's absent rotation is 0."""
+        return ih.features_to_joint_view(features)
+
+    def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
+        """(B, T, 22, 12) -> (B, T, 262); contacts come back as 0 in normalized space."""
+        return ih.joint_view_to_features(joints)
+
+    def reconstruction_mask(self, device: torch.device) -> torch.Tensor:
+        """(262,) bool: the dims the reconstruction loss covers (all but the 4 contacts)."""
+        mask = torch.ones(ih.FEATURE_DIM, dtype=torch.bool, device=device)
+        mask[ih.CONTACTS] = False
+        return mask
+
+    def denormalize(self, features: torch.Tensor) -> torch.Tensor:
+        return features * self.std + self.mean
+
+    def geometry(self, features: torch.Tensor) -> Geometry:
+        """(B, T, 262) normalized -> de-normalized Geometry."""
+        parts = ih.split_features(self.denormalize(features))
+        return Geometry(parts.positions, parts.rot6d, (parts.contacts > 0.5).to(features.dtype))
+
+
+class InterXView(nn.Module):
+    """(B, T, 56, 6) representation, which already is a per-joint image (no normalization).
+
+    Positions need a body model: pass its ``(22, 3)`` rest offsets as ``body_offsets``; without
+    them positions are None and the position-based losses are switched off by the caller.
+    """
+
+    num_joints = ix.NUM_ROWS
+    channels = ix.RAW_CHANNELS
+    feature_shape = (ix.NUM_ROWS, ix.RAW_CHANNELS)
+
+    def __init__(self, *, body_offsets: torch.Tensor | None = None, up_axis: str = "z") -> None:
+        super().__init__()
+        self.up_axis = up_axis
+        if body_offsets is not None:
+            body_offsets = torch.as_tensor(body_offsets, dtype=torch.float32)
+            if body_offsets.shape != (NUM_JOINTS, 3):
+                raise ValueError(f"body_offsets must have shape (22, 3), got {tuple(body_offsets.shape)}")
+        self.register_buffer("body_offsets", body_offsets)
+
+    @property
+    def has_positions(self) -> bool:
+        return self.body_offsets is not None
+
+    def to_joints(self, features: torch.Tensor) -> torch.Tensor:
+        return features
+
+    def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
+        return joints
+
+    def reconstruction_mask(self, device: torch.device) -> torch.Tensor:
+        return torch.ones(self.feature_shape, dtype=torch.bool, device=device)
+
+    def denormalize(self, features: torch.Tensor) -> torch.Tensor:
+        return features
+
+    def geometry(self, features: torch.Tensor) -> Geometry:
+        rot6d = features[..., : ix.NUM_ROTATION_ROWS, :]
+        if not self.has_positions:
+            return Geometry(None, rot6d, None)
+        positions = ix.interx_positions(features, offsets=self.body_offsets, up_axis=self.up_axis)
+        contacts = ih.foot_contacts(positions)
+        contacts = torch.cat((contacts, contacts[..., -1:, :]), dim=-2)  # repeat the last frame's label
+        return Geometry(positions, rot6d, contacts)

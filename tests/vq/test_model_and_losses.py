@@ -1,0 +1,137 @@
+import math
+
+import pytest
+import torch
+
+from intermask.motion import interhuman as ih
+from intermask.motion.rotations import matrix_to_rot6d, rot6d_to_matrix, rotation_about_axis
+from intermask.motion.skeleton import REST_OFFSETS
+from intermask.vq.convolutions import MotionDecoder, MotionEncoder
+from intermask.vq.losses import LossWeights, vq_losses
+from intermask.vq.model import MotionVQVAE
+from intermask.vq.quantizers import ResidualQuantizer
+from intermask.vq.views import InterHumanView, InterXView
+
+
+def _interhuman_vq(layers=2, width=16):
+    view = InterHumanView(mean=torch.zeros(262), std=torch.ones(262))
+    return MotionVQVAE(
+        view=view,
+        encoder=MotionEncoder(num_joints=22, in_channels=12, width=width),
+        quantizer=ResidualQuantizer(num_quantizers=layers, codebook_size=32, dim=width),
+        decoder=MotionDecoder(num_joints=22, out_channels=12, width=width),
+    )
+
+
+def test_encode_decode_shapes_and_consistency_with_forward():
+    torch.manual_seed(0)
+    model = _interhuman_vq()
+    features = torch.randn(3, 64, 262)
+    model.train()(features)  # initialise the codebooks
+    model.eval()
+    out = model(features)
+    tokens = model.encode(features)
+    assert tokens.shape == (3, 2, 5, 16) and tokens.dtype == torch.long
+    assert torch.equal(tokens, out.indices)
+    decoded = model.decode(tokens)
+    assert decoded.shape == (3, 64, 262)
+    torch.testing.assert_close(decoded, out.reconstruction)
+    assert torch.all(decoded[..., ih.CONTACTS] == 0)
+
+
+def test_encode_never_updates_the_codebook_even_in_train_mode():
+    model = _interhuman_vq()
+    features = torch.randn(2, 16, 262)
+    model.train()(features)
+    before = model.quantizer.layers[0].codebook.clone()
+    model.encode(features)
+    assert torch.equal(model.quantizer.layers[0].codebook, before)
+
+
+def test_frames_must_be_a_multiple_of_four():
+    with pytest.raises(ValueError, match="multiple of 4 frames, got 30"):
+        _interhuman_vq()(torch.randn(1, 30, 262))
+
+
+def _geometry_pair():
+    torch.manual_seed(1)
+    view = InterHumanView(mean=torch.zeros(262), std=torch.ones(262))
+    target = torch.randn(2, 8, 262)
+    target[..., ih.CONTACTS] = 0.0  # random positions slide: no foot is planted
+    return view, target
+
+
+def test_losses_vanish_on_a_perfect_reconstruction():
+    view, target = _geometry_pair()
+    terms = vq_losses(
+        prediction=target, target=target, predicted_geometry=view.geometry(target), target_geometry=view.geometry(target),
+        reconstruction_mask=view.reconstruction_mask(target.device), frame_mask=torch.ones(2, 8, dtype=torch.bool),
+        commit_loss=torch.tensor(0.5), weights=LossWeights(),
+    )
+    assert terms.reconstruction == 0 and terms.positions == 0 and terms.velocity == 0 and terms.bone_length == 0
+    assert terms.geodesic.abs() < 1e-3
+    assert terms.total == pytest.approx(0.02 * 0.5 + 0.01 * terms.geodesic.item())
+
+
+def test_geometric_terms_measure_what_they_claim():
+    view, target = _geometry_pair()
+    prediction = target.clone()
+    # shift every position by 1 cm on x: positions error 0.01, velocity 0, bones 0
+    prediction[..., ih.POSITIONS] += torch.tensor([0.01, 0.0, 0.0]).repeat(22)
+    # turn every joint rotation by 0.1 rad about y: geodesic 0.1
+    turn = rotation_about_axis(torch.tensor(0.1), "y")
+    base = rot6d_to_matrix(ih.split_features(target).rot6d)
+    prediction[..., ih.ROTATIONS] = matrix_to_rot6d(turn @ base).flatten(-2)
+    terms = vq_losses(
+        prediction=prediction, target=target, predicted_geometry=view.geometry(prediction),
+        target_geometry=view.geometry(target), reconstruction_mask=view.reconstruction_mask(target.device),
+        frame_mask=torch.ones(2, 8, dtype=torch.bool), commit_loss=torch.tensor(0.0), weights=LossWeights(), kind="l1",
+    )
+    assert terms.positions.item() == pytest.approx(0.01 / 3, rel=1e-4)  # one of three axes off by 1 cm
+    assert terms.velocity.item() == pytest.approx(0.0, abs=1e-6)
+    assert terms.bone_length.item() == pytest.approx(0.0, abs=1e-6)
+    assert terms.geodesic.item() == pytest.approx(0.1, abs=1e-4)
+
+
+def test_foot_contact_penalises_sliding_planted_feet_only():
+    view, target = _geometry_pair()
+    target[..., ih.POSITIONS] = 0.0
+    target[..., ih.CONTACTS] = torch.tensor([1.0, 0.0, 0.0, 0.0])  # only the left ankle is planted
+    prediction = target.clone()
+    frames = torch.arange(8.0)[None, :, None]
+    positions = prediction[..., ih.POSITIONS].reshape(2, 8, 22, 3)
+    positions[..., 7, 0] = 0.01 * frames[..., 0]  # left ankle slides 1 cm per frame
+    positions[..., 8, 0] = 0.01 * frames[..., 0]  # right ankle too, but it is not planted
+    prediction[..., ih.POSITIONS] = positions.flatten(-2)
+    mask = torch.ones(2, 8, dtype=torch.bool)
+    terms = vq_losses(
+        prediction=prediction, target=target, predicted_geometry=view.geometry(prediction),
+        target_geometry=view.geometry(target), reconstruction_mask=view.reconstruction_mask(target.device),
+        frame_mask=mask, commit_loss=torch.tensor(0.0), weights=LossWeights(), kind="l1",
+    )
+    # one planted joint of 4, one axis of 3, 1 cm per step
+    assert terms.foot_contact.item() == pytest.approx(0.01 / 12, rel=1e-4)
+
+
+def test_padding_frames_do_not_count():
+    view, target = _geometry_pair()
+    prediction = target.clone()
+    prediction[:, 4:] += 10.0
+    mask = torch.zeros(2, 8, dtype=torch.bool)
+    mask[:, :4] = True
+    terms = vq_losses(
+        prediction=prediction, target=target, predicted_geometry=view.geometry(prediction),
+        target_geometry=view.geometry(target), reconstruction_mask=view.reconstruction_mask(target.device),
+        frame_mask=mask, commit_loss=torch.tensor(0.0), weights=LossWeights(),
+    )
+    assert terms.reconstruction == 0 and terms.positions == 0 and terms.velocity == 0
+
+
+def test_interx_view_without_body_model_has_no_positions():
+    view = InterXView()
+    features = torch.randn(2, 8, 56, 6)
+    geometry = view.geometry(features)
+    assert geometry.positions is None and geometry.contacts is None and geometry.rot6d.shape == (2, 8, 55, 6)
+    with_body = InterXView(body_offsets=REST_OFFSETS).geometry(features)
+    assert with_body.positions.shape == (2, 8, 22, 3) and with_body.contacts.shape == (2, 8, 4)
+    assert not math.isnan(with_body.positions.sum().item())
