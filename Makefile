@@ -14,7 +14,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats clean
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq tb clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -56,6 +56,12 @@ data-check: install ## validate a dataset folder: make data-check ROOT=data/Inte
 
 data-stats: install ## compute normalization statistics: make data-stats ROOT=data/InterHuman
 	$(VENV)/bin/intermask data stats $(or $(ROOT),$(DATA_DIR)/synthetic/interhuman)
+
+train-vq: install ## train the VQ-VAE: make train-vq [DATA=synthetic|synthetic_interx|interhuman|interx] [ARGS="trainer.max_epochs=3"]
+	$(PY) -m intermask.train --config-name train_vq data=$(DATA) $(ARGS)
+
+tb: install ## TensorBoard over all runs: make tb [LOGDIR=outputs]
+	$(VENV)/bin/tensorboard --logdir $(or $(LOGDIR),outputs) --bind_all
 
 clean: ## remove caches and run outputs (keeps .venv and data/)
 	rm -rf .pytest_cache .ruff_cache outputs multirun lightning_logs

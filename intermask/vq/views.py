@@ -31,13 +31,25 @@ class InterHumanView(nn.Module):
     channels = ih.JOINT_VIEW_CHANNELS
     feature_shape = (ih.FEATURE_DIM,)
 
-    def __init__(self, *, mean: torch.Tensor, std: torch.Tensor) -> None:
+    def __init__(self, *, mean: torch.Tensor | None = None, std: torch.Tensor | None = None) -> None:
+        """Statistics may come later (``set_statistics``, called with the datamodule's); a
+        checkpoint restores them with the weights."""
         super().__init__()
+        self.register_buffer("mean", torch.zeros(self.feature_shape))
+        self.register_buffer("std", torch.ones(self.feature_shape))
+        self.register_buffer("has_statistics", torch.tensor(False))
+        if (mean is None) != (std is None):
+            raise ValueError("give both mean and std, or neither")
+        if mean is not None:
+            self.set_statistics(mean, std)
+
+    def set_statistics(self, mean: torch.Tensor, std: torch.Tensor) -> None:
         mean, std = torch.as_tensor(mean, dtype=torch.float32), torch.as_tensor(std, dtype=torch.float32)
         if mean.shape != self.feature_shape or std.shape != self.feature_shape:
             raise ValueError(f"InterHuman statistics must have shape (262,), got {tuple(mean.shape)} and {tuple(std.shape)}")
-        self.register_buffer("mean", mean)
-        self.register_buffer("std", std)
+        self.mean.copy_(mean)
+        self.std.copy_(std)
+        self.has_statistics.fill_(True)
 
     def to_joints(self, features: torch.Tensor) -> torch.Tensor:
         """(B, T, 262) normalized -> (B, T, 22, 12); the root's absent rotation is 0."""

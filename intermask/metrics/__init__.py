@@ -1,0 +1,1 @@
+"""torchmetrics metrics; each wraps a plain function that tests check independently."""

@@ -1,0 +1,59 @@
+"""Train one stage from a Hydra config: ``python -m intermask.train --config-name train_vq [overrides]``.
+
+Thin by design: compose, instantiate, record, fit. Everything else lives in the modules.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import hydra
+import lightning as L
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+
+from intermask.utils.run_record import write_run_record
+
+log = logging.getLogger(__name__)
+CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
+
+
+def instantiate_all(group: DictConfig | None) -> list[Any]:
+    """Instantiate every ``_target_`` entry of a callbacks/logger group (None -> [])."""
+    if not group:
+        return []
+    return [instantiate(entry) for entry in group.values() if isinstance(entry, DictConfig) and "_target_" in entry]
+
+
+def count_parameters(module: L.LightningModule) -> tuple[int, int]:
+    """(total, trainable) parameters; buffers such as EMA codebooks are not parameters."""
+    total = sum(p.numel() for p in module.parameters())
+    return total, sum(p.numel() for p in module.parameters() if p.requires_grad)
+
+
+def train(cfg: DictConfig) -> dict[str, float]:
+    """Fit the configured model on the configured data; returns the final callback metrics."""
+    L.seed_everything(cfg.seed, workers=True)
+    output_dir = Path(cfg.paths.output_dir)
+    write_run_record(output_dir, cfg, extra={"job": cfg.task_name})
+    datamodule = instantiate(cfg.data)
+    model = instantiate(cfg.model)
+    total, trainable = count_parameters(model)
+    log.info("%s: %.2fM parameters (%.2fM trainable)", type(model).__name__, total / 1e6, trainable / 1e6)
+    trainer = instantiate(cfg.trainer, callbacks=instantiate_all(cfg.get("callbacks")),
+                          logger=instantiate_all(cfg.get("logger")) or False)
+    trainer.fit(model, datamodule=datamodule, ckpt_path=cfg.get("ckpt_path"))
+    metrics = {name: float(value) for name, value in trainer.callback_metrics.items()}
+    log.info("final metrics: %s", metrics)
+    return metrics
+
+
+@hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="train_vq")
+def main(cfg: DictConfig) -> None:
+    train(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,24 @@
+"""Learning-rate schedules as pure functions of the step (wrapped by torch's LambdaLR)."""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Sequence
+
+
+def warmup_multistep_factor(
+    step: int, *, total_steps: int, warmup_fraction: float, milestones: Sequence[float], gamma: float
+) -> float:
+    """Multiplier of the base learning rate at ``step``.
+
+    Linear warm-up from 1/warmup_steps to 1 over the first ``warmup_fraction`` of ``total_steps``,
+    then multiplied by ``gamma`` once per milestone passed; milestones are fractions of
+    ``total_steps`` (InterMask VQ: warm-up 1/4, x0.1 at 0.7 and 0.85; Inter-M: x1/3 at 0.5, 0.7, 0.85).
+    """
+    if total_steps <= 0:
+        raise ValueError(f"total_steps must be positive, got {total_steps}")
+    warmup_steps = int(warmup_fraction * total_steps)
+    if step < warmup_steps:
+        return (step + 1) / warmup_steps
+    boundaries = sorted(int(m * total_steps) for m in milestones)
+    return gamma ** bisect.bisect_right(boundaries, step)

@@ -1,0 +1,115 @@
+"""VQVAEModule: trains the motion tokenizer (losses, optimizer, schedule, logging)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from functools import partial
+from typing import Any
+
+import lightning as L
+import torch
+from torch.optim import Optimizer
+from torch.optim.lr_scheduler import LambdaLR
+
+from intermask.metrics.mpjpe import MPJPE
+from intermask.utils.schedules import warmup_multistep_factor
+from intermask.vq.losses import LossKind, LossTerms, LossWeights, vq_losses
+from intermask.vq.model import MotionVQVAE
+from intermask.vq.views import InterHumanView
+
+log = logging.getLogger(__name__)
+
+
+class VQVAEModule(L.LightningModule):
+    """Trains :class:`MotionVQVAE` on single-person windows ``batch["motion"]: (B, T, *F)``.
+
+    Args:
+        net: the VQ-VAE network.
+        optimizer: partial optimizer taking the parameters (paper: AdamW lr 2e-4, betas (0.9, 0.99)).
+        loss_weights: weights of every loss term (per dataset, from the config).
+        loss_kind: elementwise loss of reconstruction and geometric terms.
+        warmup_fraction, lr_milestones, lr_gamma: the schedule (paper: 1/4 warm-up, x0.1 at 70%, 85%).
+    """
+
+    def __init__(
+        self,
+        *,
+        net: MotionVQVAE,
+        optimizer: Callable[..., Optimizer],
+        loss_weights: LossWeights | dict[str, float] | None = None,
+        loss_kind: LossKind = "smooth_l1",
+        warmup_fraction: float = 0.25,
+        lr_milestones: Sequence[float] = (0.7, 0.85),
+        lr_gamma: float = 0.1,
+    ) -> None:
+        super().__init__()
+        self.save_hyperparameters(ignore=["net"], logger=False)
+        self.net = net
+        self.optimizer_factory = optimizer
+        self.loss_weights = loss_weights if isinstance(loss_weights, LossWeights) else LossWeights(**(loss_weights or {}))
+        self.loss_kind = loss_kind
+        self.val_mpjpe = MPJPE(scale=1000.0)
+        self._warned_no_positions = False
+
+    def setup(self, stage: str) -> None:
+        """Copy the datamodule's normalization statistics into the view (then they live in checkpoints)."""
+        view = self.net.view
+        if isinstance(view, InterHumanView) and not bool(view.has_statistics):
+            normalizer = getattr(self.trainer.datamodule, "normalizer", None) if self.trainer else None
+            if normalizer is None:
+                raise RuntimeError("the InterHuman VQ needs normalization statistics: the datamodule exposes none")
+            view.set_statistics(normalizer.mean, normalizer.std)
+
+    def forward(self, features: torch.Tensor) -> torch.Tensor:
+        return self.net(features).reconstruction
+
+    def _step(self, batch: dict[str, Any]) -> tuple[LossTerms, torch.Tensor, Any, Any]:
+        motion = batch["motion"]
+        frame_mask = batch.get("frame_mask")
+        if frame_mask is None:
+            frame_mask = torch.ones(motion.shape[:2], dtype=torch.bool, device=motion.device)
+        out = self.net(motion)
+        view = self.net.view
+        predicted, real = view.geometry(out.reconstruction), view.geometry(motion)
+        if real.positions is None and not self._warned_no_positions:
+            log.info("no body model for this representation: position, velocity, bone and foot losses are off")
+            self._warned_no_positions = True
+        terms = vq_losses(
+            prediction=out.reconstruction, target=motion, predicted_geometry=predicted, target_geometry=real,
+            reconstruction_mask=view.reconstruction_mask(motion.device), frame_mask=frame_mask,
+            commit_loss=out.commit_loss, weights=self.loss_weights, kind=self.loss_kind,
+        )
+        return terms, frame_mask, out, (predicted, real)
+
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        terms, _, out, _ = self._step(batch)
+        batch_size = batch["motion"].shape[0]
+        self.log_dict({f"train/{name}": value for name, value in terms._asdict().items()}, batch_size=batch_size,
+                      prog_bar=False)
+        self.log("train/loss", terms.total, batch_size=batch_size, prog_bar=True)
+        codebook_size = self.net.quantizer.layers[0].codebook_size
+        for layer, (perplexity, dead) in enumerate(zip(out.perplexity, out.dead_codes, strict=True)):
+            self.log(f"codebook/perplexity_{layer}", perplexity, batch_size=batch_size)
+            self.log(f"codebook/dead_codes_{layer}", dead.float(), batch_size=batch_size)
+            used = torch.unique(out.indices[:, layer][out.indices[:, layer] >= 0]).numel()
+            self.log(f"codebook/usage_{layer}", used / codebook_size, batch_size=batch_size)
+        return terms.total
+
+    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
+        terms, frame_mask, _, (predicted, real) = self._step(batch)
+        batch_size = batch["motion"].shape[0]
+        self.log("val/loss", terms.total, batch_size=batch_size, sync_dist=True)
+        self.log("val/reconstruction", terms.reconstruction, batch_size=batch_size, sync_dist=True, prog_bar=True)
+        if real.positions is not None:
+            self.val_mpjpe.update(predicted.positions, real.positions, frame_mask)
+            self.log("val/mpjpe_mm", self.val_mpjpe, batch_size=batch_size, prog_bar=True)
+
+    def configure_optimizers(self) -> dict[str, Any]:
+        optimizer = self.optimizer_factory(params=self.parameters())
+        schedule = partial(
+            warmup_multistep_factor, total_steps=max(int(self.trainer.estimated_stepping_batches), 1),
+            warmup_fraction=self.hparams.warmup_fraction, milestones=tuple(self.hparams.lr_milestones),
+            gamma=self.hparams.lr_gamma,
+        )
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": LambdaLR(optimizer, schedule), "interval": "step"}}

@@ -1,0 +1,61 @@
+"""The Hydra tree composes for every job and dataset, and its values are the paper's."""
+
+from __future__ import annotations
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
+
+from conftest import CONFIG_DIR
+from intermask.data.datamodule import InteractionDataModule
+
+DATASETS = ["synthetic", "synthetic_interx", "interhuman", "interx"]
+
+
+def _compose(job: str, overrides: list[str]):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        return compose(job, overrides=overrides, return_hydra_config=False)
+
+
+@pytest.mark.parametrize("data", DATASETS)
+def test_train_vq_composes_for_every_dataset(data):
+    cfg = _compose("train_vq", [f"data={data}", "paths.output_dir=/tmp/unused"])
+    interx = "interx" in data
+    assert cfg.data.dataset == ("interx" if interx else "interhuman")
+    assert cfg.data.mode == "window" and cfg.data.window == 64 and cfg.data.stride == 10
+    assert cfg.model.net.encoder.num_joints == (56 if interx else 22)
+    assert cfg.model.loss_weights.foot_contact == (100.0 if interx else 500.0)
+    assert cfg.model.loss_weights.velocity == 100.0 and cfg.model.loss_weights.bone_length == 5.0
+    assert cfg.model.optimizer.lr == 2e-4 and list(cfg.model.optimizer.betas) == [0.9, 0.99]
+    assert cfg.trainer.max_epochs == 50 and cfg.trainer.gradient_clip_val == 1.0
+    OmegaConf.resolve(cfg)  # every interpolation resolves
+
+
+def test_data_config_instantiates_the_datamodule(tmp_path):
+    cfg = _compose("train_vq", ["data=synthetic", f"paths.data_dir={tmp_path}", "paths.output_dir=/tmp/unused"])
+    datamodule = instantiate(cfg.data)
+    assert isinstance(datamodule, InteractionDataModule)
+    assert datamodule.root == tmp_path / "synthetic" / "interhuman"
+    assert datamodule.mode == "window" and datamodule.max_length == 300 and datamodule.seed == 3407
+
+
+def test_unknown_keys_are_rejected():
+    from hydra.errors import ConfigCompositionException
+
+    with pytest.raises(ConfigCompositionException, match="Could not override 'data.no_such_option'"):
+        _compose("train_vq", ["data.no_such_option=1"])
+
+
+def test_trainer_presets_compose():
+    for preset, expected in [("cpu", "cpu"), ("gpu", "gpu"), ("ddp", "gpu"), ("ddp_cpu", "cpu")]:
+        cfg = _compose("train_vq", [f"trainer={preset}", "paths.output_dir=/tmp/unused"])
+        assert cfg.trainer.accelerator == expected
+    assert _compose("train_vq", ["trainer=gpu"]).trainer.precision == "bf16-mixed"
+
+
+def test_slurm_launcher_composes():
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose("train_vq", overrides=["hydra/launcher=slurm"], return_hydra_config=True)
+    assert cfg.hydra.launcher._target_.endswith("SlurmLauncher")
+    assert cfg.hydra.launcher.gpus_per_node == 1
