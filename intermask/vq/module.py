@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
+from dataclasses import asdict
 from functools import partial
 from typing import Any
 
@@ -44,11 +45,17 @@ class VQVAEModule(L.LightningModule):
         lr_gamma: float = 0.1,
     ) -> None:
         super().__init__()
-        self.save_hyperparameters(ignore=["net"], logger=False)
         self.net = net
         self.optimizer_factory = optimizer
         self.loss_weights = loss_weights if isinstance(loss_weights, LossWeights) else LossWeights(**(loss_weights or {}))
         self.loss_kind = loss_kind
+        # plain Python values only, so checkpoints load with torch.load(weights_only=True)
+        self.save_hyperparameters(
+            {"loss_weights": asdict(self.loss_weights), "loss_kind": str(loss_kind),
+             "warmup_fraction": float(warmup_fraction), "lr_milestones": [float(m) for m in lr_milestones],
+             "lr_gamma": float(lr_gamma)},
+            logger=False,
+        )
         self.val_mpjpe = MPJPE(scale=1000.0)
         self._warned_no_positions = False
 
