@@ -114,7 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)
-    except (FileNotFoundError, ValueError) as error:
+    except (FileNotFoundError, FileExistsError, ValueError) as error:
         # Data problems are user errors: one clear line, no traceback.
         print(f"intermask {args.command}: error: {error}", file=sys.stderr)
         return 2

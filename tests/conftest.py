@@ -7,7 +7,6 @@ from pathlib import Path
 import pytest
 import torch
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 SMALL_DATASET_CLIPS = 48
 
 

@@ -7,8 +7,8 @@ from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
-from conftest import CONFIG_DIR
 from intermask.data.datamodule import InteractionDataModule
+from intermask.train import CONFIG_DIR
 
 DATASETS = ["synthetic", "synthetic_interx", "interhuman", "interx"]
 

@@ -10,8 +10,7 @@ from hydra import compose, initialize_config_dir
 from lightning.pytorch import Callback
 from omegaconf import open_dict
 
-from conftest import CONFIG_DIR
-from intermask.train import train
+from intermask.train import CONFIG_DIR, train
 
 
 def _config(data_root: Path, output_dir: Path, overrides: list[str] = ()):

@@ -1,0 +1,49 @@
+"""Dataset readers (InterHuman, Inter-X, synthetic), normalization, windowing, validation, DataModule.
+
+Shapes: P persons (2), T frames, C channels. InterHuman items carry (P, T, 262) features,
+Inter-X items (P, T, 56, 6); VQ windows are single-person (T, C...).
+"""
+
+from intermask.data.captions import swap_left_right
+from intermask.data.common import EpochSampler, item_rng
+from intermask.data.errors import DataError, DataProblem, SkippedClip
+from intermask.data.interhuman import InterHumanDataset
+from intermask.data.interx import InterXDataset
+from intermask.data.item import ExportedItem, export_item, load_item
+from intermask.data.normalization import Normalizer, compute_and_save_stats, default_stats_dir
+from intermask.data.validation import CheckReport, check_dataset, check_dataset_report
+from intermask.data.windows import WindowIndex, build_window_index, window_count
+
+
+def __getattr__(name: str):
+    # The DataModule pulls in Lightning; import it only when asked for.
+    if name == "InteractionDataModule":
+        from intermask.data.datamodule import InteractionDataModule
+
+        return InteractionDataModule
+    raise AttributeError(f"module 'intermask.data' has no attribute {name!r}")
+
+
+__all__ = [
+    "CheckReport",
+    "DataError",
+    "DataProblem",
+    "EpochSampler",
+    "ExportedItem",
+    "InterHumanDataset",
+    "InterXDataset",
+    "InteractionDataModule",
+    "Normalizer",
+    "SkippedClip",
+    "WindowIndex",
+    "build_window_index",
+    "check_dataset",
+    "check_dataset_report",
+    "compute_and_save_stats",
+    "default_stats_dir",
+    "export_item",
+    "item_rng",
+    "load_item",
+    "swap_left_right",
+    "window_count",
+]

@@ -1,0 +1,255 @@
+"""LightningDataModule over the InterHuman / Inter-X readers.
+
+Batches are the default collate of the dataset items: a dict of tensors ("motion" (B, 2, T, C...)
+or (B, window, C...), "length" (B,), ...) and lists of strings ("caption", "id", ...).
+
+Randomness: every item is drawn from a generator seeded by (seed, epoch, index) and the order from
+(seed, epoch) (``EpochSampler``), so a pass is identical across runs, machines and worker counts;
+Lightning moves the epoch forward during training. ``eval_dataloader(epoch=k)`` replays pass k.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Literal
+
+from lightning import LightningDataModule
+from torch.utils.data import DataLoader, Dataset
+
+from intermask.data.common import EpochSampler
+from intermask.data.errors import DataError
+from intermask.data.interhuman import InterHumanDataset
+from intermask.data.interx import FEATURE_SHAPE as INTERX_FEATURE_SHAPE
+from intermask.data.interx import InterXDataset
+from intermask.data.normalization import (
+    Normalizer,
+    compute_and_save_stats,
+    default_stats_dir,
+    stats_exist,
+)
+from intermask.motion.interhuman import FEATURE_DIM
+
+log = logging.getLogger(__name__)
+
+DatasetKind = Literal["interhuman", "interx"]
+Mode = Literal["interaction", "window"]
+Split = Literal["train", "val", "test"]
+DEFAULT_MAX_LENGTH = {"interhuman": 300, "interx": 150}  # frames (InterGen / InterMask settings)
+DEFAULT_MIN_LENGTH = {"interhuman": 15, "interx": 24}
+
+
+class InteractionDataModule(LightningDataModule):
+    """Train/val/test loaders for one dataset folder.
+
+    normalize: None = dataset default (InterHuman yes, Inter-X no, as in the reference).
+    swap_persons: None = dataset default (InterHuman yes in every split, Inter-X no).
+    mirror: mirrored copies in the training split only (InterHuman only).
+    stats_dir: where mean.npy/std.npy (or the reference global_mean.npy/global_std.npy) live;
+        default ``<root>/stats``. Missing statistics are computed from the training split when
+        ``compute_stats`` is on, otherwise setup raises with the command that computes them.
+    synthesize_if_missing: build the synthetic dataset at ``root`` (``synthetic_clips`` clips,
+        ``synthetic_seed``) in prepare_data when ``root`` does not exist.
+    """
+
+    def __init__(
+        self,
+        *,
+        dataset: DatasetKind,
+        root: str,
+        mode: Mode = "interaction",
+        batch_size: int = 32,
+        eval_batch_size: int | None = None,
+        num_workers: int = 0,
+        pin_memory: bool = False,
+        persistent_workers: bool = False,
+        drop_last: bool = False,
+        max_length: int | None = None,
+        min_length: int | None = None,
+        window: int = 64,
+        stride: int = 10,
+        mirror: bool = True,
+        swap_persons: bool | None = None,
+        normalize: bool | None = None,
+        stats_dir: str | None = None,
+        compute_stats: bool = True,
+        seed: int = 3407,
+        eval_shuffle: bool = False,
+        synthesize_if_missing: bool = False,
+        synthetic_clips: int = 200,
+        synthetic_seed: int = 0,
+    ):
+        super().__init__()
+        if dataset not in ("interhuman", "interx"):
+            raise ValueError(f"dataset must be 'interhuman' or 'interx', got {dataset!r}")
+        if mode not in ("interaction", "window"):
+            raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        self.save_hyperparameters()
+        self.dataset, self.root, self.mode = dataset, Path(root), mode
+        self.batch_size = batch_size
+        self.eval_batch_size = eval_batch_size or batch_size
+        self.num_workers, self.pin_memory = num_workers, pin_memory
+        self.persistent_workers = persistent_workers and num_workers > 0
+        self.drop_last = drop_last
+        self.max_length = max_length or DEFAULT_MAX_LENGTH[dataset]
+        self.min_length = min_length or DEFAULT_MIN_LENGTH[dataset]
+        self.window, self.stride = window, stride
+        # Inter-X has no mirror augmentation in the reference (no left/right caption tokens to
+        # swap in its POS-tagged texts); the flag is ignored there, loudly.
+        self.mirror = mirror and dataset == "interhuman"
+        if mirror and dataset == "interx":
+            log.info("mirror augmentation is InterHuman only; Inter-X trains without it")
+        self.swap_persons = swap_persons if swap_persons is not None else dataset == "interhuman"
+        self.normalize = normalize if normalize is not None else dataset == "interhuman"
+        self.stats_dir = Path(stats_dir) if stats_dir else default_stats_dir(root)
+        self.compute_stats = compute_stats
+        self.seed, self.eval_shuffle = seed, eval_shuffle
+        self.synthesize_if_missing = synthesize_if_missing
+        self.synthetic_clips, self.synthetic_seed = synthetic_clips, synthetic_seed
+        self.normalizer: Normalizer | None = None
+        self.datasets: dict[str, Dataset] = {}
+
+    @property
+    def feature_shape(self) -> tuple[int, ...]:
+        """Per-person, per-frame feature shape: (262,) or (56, 6)."""
+        return (FEATURE_DIM,) if self.dataset == "interhuman" else INTERX_FEATURE_SHAPE
+
+    # ------------------------------------------------------------------ preparation
+
+    def prepare_data(self) -> None:
+        """Rank zero only: synthesize the dataset and compute statistics if they are missing."""
+        if not self.root.exists() and self.synthesize_if_missing:
+            from intermask.data.synthetic import generate_dataset
+
+            log.info(
+                "synthesizing %d %s clips into %s (seed %d)",
+                self.synthetic_clips,
+                self.dataset,
+                self.root,
+                self.synthetic_seed,
+            )
+            generate_dataset(
+                self.root, format=self.dataset, clips=self.synthetic_clips, seed=self.synthetic_seed
+            )
+        if (
+            self.normalize
+            and self.compute_stats
+            and self.root.is_dir()
+            and not stats_exist(self.stats_dir)
+        ):
+            self._compute_stats()
+
+    def _compute_stats(self) -> None:
+        log.info(
+            "computing normalization statistics of %s (train split) into %s",
+            self.root,
+            self.stats_dir,
+        )
+        compute_and_save_stats(
+            self.root, dataset=self.dataset, split="train", out_dir=self.stats_dir
+        )
+
+    def load_normalizer(self) -> Normalizer | None:
+        if not self.normalize:
+            return None
+        if not stats_exist(self.stats_dir):
+            if not self.compute_stats:
+                command = f"intermask data stats {self.root} --format {self.dataset}"
+                if self.stats_dir != default_stats_dir(self.root):
+                    command += f" (writes {default_stats_dir(self.root)}; point stats_dir there)"
+                raise DataError(
+                    f"{self.stats_dir}: normalization statistics not found; compute them with "
+                    f"`{command}` or set compute_stats=true"
+                )
+            self._compute_stats()
+        return Normalizer.load(self.stats_dir, feature_shape=self.feature_shape)
+
+    def setup(self, stage: str | None = None) -> None:
+        if self.normalizer is None:
+            self.normalizer = self.load_normalizer()
+        splits: tuple[Split, ...] = {
+            "fit": ("train", "val"),
+            "validate": ("val",),
+            "test": ("test",),
+            "predict": ("test",),
+        }.get(stage or "", ("train", "val", "test"))
+        for split in splits:
+            if split not in self.datasets:
+                self.datasets[split] = self.build_dataset(split)
+
+    def build_dataset(self, split: Split, *, mode: Mode | None = None) -> Dataset:
+        """The dataset of ``split`` with this module's settings (mirroring in train only)."""
+        common = dict(
+            root=self.root,
+            split=split,
+            mode=mode or self.mode,
+            max_length=self.max_length,
+            min_length=self.min_length,
+            window=self.window,
+            stride=self.stride,
+            swap_persons=self.swap_persons,
+            normalizer=self.normalizer,
+            seed=self.seed,
+        )
+        if self.dataset == "interhuman":
+            return InterHumanDataset(mirror=self.mirror and split == "train", **common)
+        return InterXDataset(**common)
+
+    # ------------------------------------------------------------------ loaders
+
+    def _loader(
+        self, split: Split, *, batch_size: int, shuffle: bool, drop_last: bool, epoch: int = 0
+    ) -> DataLoader:
+        if split not in self.datasets:
+            self.setup({"train": "fit", "val": "validate", "test": "test"}[split])
+        dataset = self.datasets[split]
+        sampler = EpochSampler(len(dataset), shuffle=shuffle, seed=self.seed, epoch=epoch)
+        return DataLoader(
+            dataset,
+            batch_size=batch_size,
+            sampler=sampler,
+            num_workers=self.num_workers,
+            pin_memory=self.pin_memory,
+            persistent_workers=self.persistent_workers,
+            drop_last=drop_last,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader(
+            "train", batch_size=self.batch_size, shuffle=True, drop_last=self.drop_last
+        )
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader(
+            "val", batch_size=self.eval_batch_size, shuffle=self.eval_shuffle, drop_last=False
+        )
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader(
+            "test", batch_size=self.eval_batch_size, shuffle=self.eval_shuffle, drop_last=False
+        )
+
+    def eval_dataloader(
+        self,
+        split: Split = "test",
+        *,
+        batch_size: int | None = None,
+        shuffle: bool = True,
+        drop_last: bool = True,
+        epoch: int = 0,
+    ) -> DataLoader:
+        """A reproducible evaluation pass: pass ``epoch`` re-draws crops, captions, order and
+        person swaps; the same ``(seed, epoch)`` gives the same batches in every run.
+
+        Defaults follow the protocol (shuffled eval batches, drop_last); the GT-vs-GT FID needs two
+        passes with different epochs.
+        """
+        return self._loader(
+            split,
+            batch_size=batch_size or self.eval_batch_size,
+            shuffle=shuffle,
+            drop_last=drop_last,
+            epoch=epoch,
+        )

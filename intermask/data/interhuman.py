@@ -1,0 +1,375 @@
+"""InterHuman reader for the official layout (see /work/shared/design/data-formats.md).
+
+    <root>/annots/<id>.txt                       captions, one per line
+    <root>/motions_processed/person{1,2}/<id>.npy float32 (T, 492), Z-up
+    <root>/split/{train,val,test}.txt            clip ids
+    <root>/ignore_list.txt or <root>/split/ignore_list.txt
+
+Every clip of the split is read once at construction; only the 22 body positions and 21 body
+rotations (192 of the 492 columns) are kept, in one contiguous array so that DataLoader workers
+share it copy-on-write. The 262-d features are computed per item (crop and reference person are
+random, and canonicalization depends on both) by ``intermask.motion.interhuman``.
+
+Item modes:
+    "interaction": {"motion": (2, max_length, 262), "length", "caption", "id", "mirrored",
+                    "persons", and "action", "action_id", "actor" when interaction_meta.json exists}
+    "window":      {"motion": (window, 262), "id", "person", "mirrored", "start"}: single-person
+                   windows over whole canonical sequences (person 2 in person 1's frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from einops import rearrange
+from torch.utils.data import Dataset
+
+from intermask.data.captions import swap_left_right
+from intermask.data.common import (
+    ClipMeta,
+    ItemKey,
+    item_rng,
+    log_skipped,
+    read_caption_lines,
+    read_id_list,
+    read_interaction_meta,
+    single_threaded,
+    split_key,
+)
+from intermask.data.errors import DataError, SkippedClip
+from intermask.data.normalization import Normalizer
+from intermask.data.windows import build_window_index
+from intermask.motion.interhuman import (
+    FEATURE_DIM,
+    RAW_DIM,
+    RAW_POSITIONS,
+    RAW_ROTATIONS,
+    interaction_features,
+)
+
+Mode = Literal["interaction", "window"]
+SPLITS = ("train", "val", "test")
+BODY_DIM = 192  # 22 positions x 3 + 21 rotations x 6
+IGNORE_FILE = "ignore_list.txt"
+
+
+@dataclass(frozen=True)
+class InterHumanLayout:
+    """Paths of the official release under ``root``."""
+
+    root: Path
+
+    @property
+    def annots(self) -> Path:
+        return self.root / "annots"
+
+    def motion_file(self, person: int, clip_id: str) -> Path:
+        return self.root / "motions_processed" / f"person{person}" / f"{clip_id}.npy"
+
+    def caption_file(self, clip_id: str) -> Path:
+        return self.annots / f"{clip_id}.txt"
+
+    def split_file(self, split: str) -> Path:
+        return self.root / "split" / f"{split}.txt"
+
+    def ignore_files(self) -> list[Path]:
+        # The reference loaders disagree on where the ignore list lives: accept both places.
+        return [
+            p for p in (self.root / IGNORE_FILE, self.root / "split" / IGNORE_FILE) if p.is_file()
+        ]
+
+
+def check_root(root: Path) -> None:
+    if not root.is_dir():
+        raise DataError(f"{root}: dataset root not found (expected the InterHuman folder)")
+
+
+def read_ignore_list(layout: InterHumanLayout) -> set[str]:
+    ignored: set[str] = set()
+    for path in layout.ignore_files():
+        ignored.update(read_id_list(path, what="ignore list"))
+    return ignored
+
+
+def load_person(path: Path) -> np.ndarray:
+    """(T, 492) raw rows -> (T, 192) body columns, float32; DataError on any problem."""
+    if not path.is_file():
+        raise DataError(f"{path}: motion file not found")
+    try:
+        raw = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as err:
+        raise DataError(f"{path}: cannot read as .npy ({err})") from err
+    if raw.ndim != 2 or raw.shape[1] != RAW_DIM:
+        raise DataError(f"{path}: expected shape (T, {RAW_DIM}), got {tuple(raw.shape)}")
+    if not np.issubdtype(raw.dtype, np.floating):
+        raise DataError(f"{path}: expected a float array, got dtype {raw.dtype}")
+    body = np.concatenate((raw[:, RAW_POSITIONS], raw[:, RAW_ROTATIONS]), axis=1).astype(np.float32)
+    bad = ~np.isfinite(body)
+    if bad.any():
+        frames = np.unique(np.nonzero(bad)[0])[:5].tolist()
+        raise DataError(
+            f"{path}: {int(bad.sum())} NaN/Inf values in the body columns (first bad frames {frames})"
+        )
+    return body
+
+
+def load_clip(layout: InterHumanLayout, clip_id: str) -> tuple[np.ndarray, list[str]]:
+    """One clip -> ((T, 2, 192) body columns of both persons, captions)."""
+    person1 = load_person(layout.motion_file(1, clip_id))
+    person2 = load_person(layout.motion_file(2, clip_id))
+    if person1.shape[0] != person2.shape[0]:
+        raise DataError(
+            f"{layout.motion_file(2, clip_id)}: expected {person1.shape[0]} frames like person1, "
+            f"got {person2.shape[0]}"
+        )
+    captions = read_caption_lines(layout.caption_file(clip_id))
+    return np.stack((person1, person2), axis=1), captions
+
+
+def body_to_raw(body: torch.Tensor) -> torch.Tensor:
+    """(..., 192) body columns -> (..., 492) raw rows (hand columns zero; the features ignore them)."""
+    raw = body.new_zeros(*body.shape[:-1], RAW_DIM)
+    n_pos = RAW_POSITIONS.stop - RAW_POSITIONS.start
+    raw[..., RAW_POSITIONS] = body[..., :n_pos]
+    raw[..., RAW_ROTATIONS] = body[..., n_pos:]
+    return raw
+
+
+class InterHumanDataset(Dataset):
+    """InterHuman clips of one split (see the module docstring for the item layout).
+
+    Augmentation, as in the reference loaders: captions drawn at random; clips longer than
+    ``max_length`` frames get a random ``max_length`` crop (features are one frame shorter:
+    lengths ``min_length - 1 .. max_length - 1``, zero-padded to ``max_length``);
+    ``swap_persons`` swaps the persons with p=0.5 before canonicalization (who is the reference)
+    and again after (the order returned); ``mirror`` (training) adds a mirrored copy of every
+    clip, with left/right words of its captions swapped. Clips shorter than ``min_length`` frames
+    and ids on the ignore list go to ``self.skipped`` (logged), never silently.
+    """
+
+    feature_dim = FEATURE_DIM
+
+    def __init__(
+        self,
+        *,
+        root: str | Path,
+        split: str,
+        mode: Mode = "interaction",
+        max_length: int = 300,
+        min_length: int = 15,
+        window: int = 64,
+        stride: int = 10,
+        mirror: bool = False,
+        swap_persons: bool = True,
+        normalizer: Normalizer | None = None,
+        seed: int = 3407,
+        epoch: int = 0,
+    ):
+        if mode not in ("interaction", "window"):
+            raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
+        if not 2 <= min_length <= max_length:
+            raise ValueError(
+                f"need 2 <= min_length <= max_length, got {min_length} and {max_length}"
+            )
+        if normalizer is not None and normalizer.feature_shape != (FEATURE_DIM,):
+            raise ValueError(
+                f"normalizer must have shape ({FEATURE_DIM},), got {normalizer.feature_shape}"
+            )
+        self.layout = InterHumanLayout(Path(root))
+        self.split, self.mode = split, mode
+        self.max_length, self.min_length = max_length, min_length
+        self.window, self.stride = window, stride
+        self.mirror, self.swap_persons = mirror, swap_persons
+        self.normalizer, self.seed, self.epoch = normalizer, seed, epoch
+        self._load()
+        if mode == "window":
+            self._build_windows()
+
+    # ------------------------------------------------------------------ construction
+
+    def _load(self) -> None:
+        check_root(self.layout.root)
+        split_path = self.layout.split_file(self.split)
+        listed = read_id_list(split_path, what=f"{self.split} split")
+        ignored = read_ignore_list(self.layout)
+        meta = read_interaction_meta(self.layout.root)
+        self.skipped: list[SkippedClip] = [
+            SkippedClip(i, "on ignore_list.txt") for i in listed if i in ignored
+        ]
+        ids, bodies, captions, metas = [], [], [], []
+        for clip_id in (i for i in listed if i not in ignored):
+            body, clip_captions = load_clip(self.layout, clip_id)
+            if body.shape[0] < self.min_length:
+                self.skipped.append(SkippedClip(clip_id, f"shorter than {self.min_length} frames"))
+                continue
+            ids.append(clip_id)
+            bodies.append(body)
+            captions.append(clip_captions)
+            if meta is not None:
+                metas.append(_clip_meta(meta, clip_id, self.layout.root))
+        log_skipped(self.skipped, where=str(split_path))
+        if not ids:
+            raise DataError(
+                f"{split_path}: split resolves to zero clips ({len(listed)} listed, "
+                f"{len(self.skipped)} skipped: ignore list or shorter than {self.min_length} frames)"
+            )
+        self.clip_ids: list[str] = ids
+        self.captions: list[list[str]] = captions
+        self.mirrored_captions = [[swap_left_right(c) for c in cs] for cs in captions]
+        self.meta: list[ClipMeta] | None = metas if meta is not None else None
+        self.frames = np.array([b.shape[0] for b in bodies], dtype=np.int64)  # raw frames per clip
+        self._offsets = np.concatenate(([0], np.cumsum(self.frames)))
+        self._body = np.concatenate(bodies, axis=0)  # (sum T, 2, 192)
+
+    def _build_windows(self) -> None:
+        sequences, self._window_source = [], []
+        for clip in range(len(self.clip_ids)):
+            for mirrored in (False, True) if self.mirror else (False,):
+                features = self.clip_features(clip, mirror=mirrored).numpy()  # (T-1, 2, 262)
+                for person in (0, 1):
+                    sequences.append(features[:, person])
+                    self._window_source.append((clip, person + 1, mirrored))
+        lengths = [len(s) for s in sequences]
+        self._window_offsets = np.concatenate(([0], np.cumsum(lengths)))
+        self._window_data = np.concatenate(sequences, axis=0)  # (sum L, 262)
+        self.windows = build_window_index(lengths, window=self.window, stride=self.stride)
+        short = sorted(
+            {
+                self.clip_ids[c]
+                for (c, _, _), n in zip(self._window_source, lengths, strict=True)
+                if n < self.window
+            }
+        )
+        log_skipped(
+            [
+                SkippedClip(
+                    i, f"fewer than {self.window} feature frames: no {self.window}-frame window"
+                )
+                for i in short
+            ],
+            where=f"{self.layout.split_file(self.split)} (windows)",
+        )
+        if len(self.windows.start) == 0:
+            raise DataError(
+                f"{self.layout.split_file(self.split)}: no clip is long enough for a {self.window}-frame window"
+            )
+
+    # ------------------------------------------------------------------ features
+
+    def clip_body(self, clip: int) -> torch.Tensor:
+        """(T, 2, 192) raw body columns of clip ``clip`` (persons in file order)."""
+        return torch.from_numpy(self._body[self._offsets[clip] : self._offsets[clip + 1]])
+
+    def clip_features(
+        self,
+        clip: int,
+        *,
+        mirror: bool = False,
+        swap: bool = False,
+        start: int = 0,
+        frames: int | None = None,
+    ) -> torch.Tensor:
+        """Un-normalized features (T'-1, 2, 262) of frames ``start:start+frames`` of a clip.
+
+        Person 1 (person 2 when ``swap``) is the canonical reference; the other one is in its frame.
+        """
+        body = self.clip_body(clip)
+        stop = len(body) if frames is None else start + frames
+        first, second = (1, 0) if swap else (0, 1)
+        with single_threaded():
+            raw = body_to_raw(body[start:stop])
+            return interaction_features(raw[:, first], raw[:, second], mirror=mirror)
+
+    # ------------------------------------------------------------------ items
+
+    def __len__(self) -> int:
+        if self.mode == "window":
+            return len(self.windows.start)
+        return len(self.clip_ids) * (2 if self.mirror else 1)
+
+    def __getitem__(self, key: ItemKey) -> dict[str, Any]:
+        index, epoch = split_key(key, self.epoch)
+        if not 0 <= index < len(self):
+            raise IndexError(f"index {index} out of range for {len(self)} items")
+        with single_threaded():
+            if self.mode == "window":
+                return self._window_item(index)
+            return self._interaction_item(index, item_rng(self.seed, epoch, index))
+
+    def _window_item(self, index: int) -> dict[str, Any]:
+        seq, start = int(self.windows.sequence[index]), int(self.windows.start[index])
+        first = self._window_offsets[seq] + start
+        motion = torch.from_numpy(self._window_data[first : first + self.window])
+        if self.normalizer is not None:
+            motion = self.normalizer.normalize(motion)
+        clip, person, mirrored = self._window_source[seq]
+        return {
+            "motion": motion,
+            "id": self.clip_ids[clip],
+            "person": person,
+            "mirrored": mirrored,
+            "start": start,
+        }
+
+    def _interaction_item(self, index: int, rng: np.random.Generator) -> dict[str, Any]:
+        clip, mirrored = index % len(self.clip_ids), index >= len(self.clip_ids)
+        frames = int(self.frames[clip])
+        # Any start in [0, T - max_length]; the reference's range() leaves out the last one.
+        start = (
+            int(rng.integers(0, frames - self.max_length + 1)) if frames > self.max_length else 0
+        )
+        swap_reference = self.swap_persons and bool(rng.random() < 0.5)
+        swap_output = self.swap_persons and bool(rng.random() < 0.5)
+        captions = self.mirrored_captions[clip] if mirrored else self.captions[clip]
+        caption = captions[int(rng.integers(len(captions)))]
+        features = self.clip_features(
+            clip,
+            mirror=mirrored,
+            swap=swap_reference,
+            start=start,
+            frames=min(frames, self.max_length),
+        )  # (L, 2, 262)
+        persons = [2, 1] if swap_reference else [1, 2]
+        if swap_output:
+            features, persons = features.flip(1), persons[::-1]
+        if self.normalizer is not None:
+            features = self.normalizer.normalize(features)
+        length = features.shape[0]
+        motion = features.new_zeros(2, self.max_length, FEATURE_DIM)
+        motion[:, :length] = rearrange(features, "t p c -> p t c")
+        item: dict[str, Any] = {
+            "motion": motion,
+            "length": length,
+            "caption": caption,
+            "id": self.clip_ids[clip],
+            "mirrored": mirrored,
+            "persons": torch.tensor(persons),
+        }
+        if self.meta is not None:
+            meta = self.meta[clip]
+            item.update(
+                action=meta.action, action_id=meta.action_id, actor=persons.index(meta.actor) + 1
+            )
+        return item
+
+
+def _clip_meta(meta: dict[str, ClipMeta], clip_id: str, root: Path) -> ClipMeta:
+    if clip_id not in meta:
+        raise DataError(f"{root / 'interaction_meta.json'}: no entry for clip {clip_id!r}")
+    return meta[clip_id]
+
+
+def interhuman_stats_sequences(dataset: InterHumanDataset):
+    """Yields (T-1, 2, 262) un-normalized features of every clip, for the normalization statistics.
+
+    Both choices of reference person and both mirror states: the distribution the model trains on
+    when person swapping and mirroring are on.
+    """
+    for clip in range(len(dataset.clip_ids)):
+        for swap in (False, True):
+            for mirror in (False, True):
+                yield dataset.clip_features(clip, mirror=mirror, swap=swap)
