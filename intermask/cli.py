@@ -57,12 +57,13 @@ def _data_check(args: argparse.Namespace) -> int:
 
 
 def _data_stats(args: argparse.Namespace) -> int:
-    from intermask.data.normalization import compute_and_save_statistics
+    from intermask.data.normalization import compute_and_save_stats, default_stats_dir
 
     root = Path(args.root)
     dataset_format = _resolve_format(root, args.format)
-    path = compute_and_save_statistics(root, dataset_format, split=args.split)
-    print(f"normalization statistics of {root} ({dataset_format}, split {args.split}) written to {path}")
+    out_dir = args.out or default_stats_dir(root)
+    compute_and_save_stats(root, dataset=dataset_format, split=args.split, out_dir=out_dir)
+    print(f"normalization statistics of {root} ({dataset_format}, split {args.split}) written to {out_dir}")
     return 0
 
 
@@ -98,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     stats.add_argument("root", type=Path)
     _add_format_option(stats)
     stats.add_argument("--split", default="train")
+    stats.add_argument("--out", type=Path, default=None, help="statistics folder (default: ROOT/stats)")
     stats.set_defaults(run=_data_stats)
 
     item = data.add_parser("item", help="write one processed clip (augmentation off) to an .npz for inspection")

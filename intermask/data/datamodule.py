@@ -156,9 +156,7 @@ class InteractionDataModule(LightningDataModule):
             return None
         if not stats_exist(self.stats_dir):
             if not self.compute_stats:
-                command = f"intermask data stats {self.root} --format {self.dataset}"
-                if self.stats_dir != default_stats_dir(self.root):
-                    command += f" (writes {default_stats_dir(self.root)}; point stats_dir there)"
+                command = f"intermask data stats {self.root} --format {self.dataset} --out {self.stats_dir}"
                 raise DataError(
                     f"{self.stats_dir}: normalization statistics not found; compute them with "
                     f"`{command}` or set compute_stats=true"

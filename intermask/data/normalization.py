@@ -243,19 +243,6 @@ def compute_and_save_stats(
     return normalizer
 
 
-def compute_and_save_statistics(
-    root: str | Path,
-    format: DatasetKind,
-    *,
-    split: str = "train",
-    out_dir: str | Path | None = None,
-) -> Path:
-    """``compute_and_save_stats`` for ``intermask data stats``: returns the statistics folder."""
-    out = Path(out_dir) if out_dir is not None else default_stats_dir(root)
-    compute_and_save_stats(root, dataset=format, split=split, out_dir=out)
-    return out
-
-
 def _check_stats(mean: torch.Tensor, std: torch.Tensor, source: str) -> None:
     if mean.shape != std.shape:
         raise DataError(f"{source}: mean shape {tuple(mean.shape)} != std shape {tuple(std.shape)}")

@@ -154,10 +154,3 @@ def test_interx_stats(tmp_path):
         norm.mean[22], torch.tensor([1.0, 0, 0, 1, 0, 0], dtype=torch.float64), atol=1e-6
     )
     assert torch.allclose(norm.std[22], torch.full((6,), 1e-3, dtype=torch.float64))
-
-
-def test_cli_entry_point_returns_the_folder(interhuman_root, tmp_path):
-    from intermask.data.normalization import compute_and_save_statistics
-
-    out = compute_and_save_statistics(interhuman_root, "interhuman", out_dir=tmp_path / "s")
-    assert out == tmp_path / "s" and (out / "mean.npy").is_file() and (out / "std.npy").is_file()
