@@ -17,7 +17,9 @@ from intermask.data.layout import FORMATS
 
 def _add_format_option(parser: argparse.ArgumentParser, required: bool = False) -> None:
     parser.add_argument(
-        "--format", choices=FORMATS, required=required,
+        "--format",
+        choices=FORMATS,
+        required=required,
         help="dataset layout" + ("" if required else " (default: detected from the folder)"),
     )
 
@@ -35,8 +37,16 @@ def _data_synth(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     summary = generate_dataset(args.out, format=args.format, clips=args.clips, seed=args.seed)
     seconds = time.perf_counter() - start
-    write_run_record(args.out, extra={"job": "data synth", "format": args.format, "clips": args.clips,
-                                      "seed": args.seed, "seconds": round(seconds, 2)})
+    write_run_record(
+        args.out,
+        extra={
+            "job": "data synth",
+            "format": args.format,
+            "clips": args.clips,
+            "seed": args.seed,
+            "seconds": round(seconds, 2),
+        },
+    )
     print(f"wrote {summary} to {args.out} in {seconds:.1f} s")
     return 0
 
@@ -63,7 +73,9 @@ def _data_stats(args: argparse.Namespace) -> int:
     dataset_format = _resolve_format(root, args.format)
     out_dir = args.out or default_stats_dir(root)
     compute_and_save_stats(root, dataset=dataset_format, split=args.split, out_dir=out_dir)
-    print(f"normalization statistics of {root} ({dataset_format}, split {args.split}) written to {out_dir}")
+    print(
+        f"normalization statistics of {root} ({dataset_format}, split {args.split}) written to {out_dir}"
+    )
     return 0
 
 
@@ -72,7 +84,9 @@ def _data_item(args: argparse.Namespace) -> int:
 
     root = Path(args.root)
     dataset_format = _resolve_format(root, args.format)
-    path = export_item(root, dataset_format, split=args.split, clip_id=args.id, out_path=Path(args.out))
+    path = export_item(
+        root, dataset_format, split=args.split, clip_id=args.id, out_path=Path(args.out)
+    )
     print(f"clip {args.id} ({dataset_format}, {args.split}) written to {path}")
     return 0
 
@@ -81,28 +95,40 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="intermask", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
 
-    data = commands.add_parser("data", help="dataset tools").add_subparsers(dest="data_command", required=True)
+    data = commands.add_parser("data", help="dataset tools").add_subparsers(
+        dest="data_command", required=True
+    )
 
-    synth = data.add_parser("synth", help="write the procedural two-person dataset in an official layout")
+    synth = data.add_parser(
+        "synth", help="write the procedural two-person dataset in an official layout"
+    )
     synth.add_argument("--out", type=Path, required=True, help="dataset root to create")
     _add_format_option(synth, required=True)
     synth.add_argument("--clips", type=int, default=1000, help="number of clips (default 1000)")
     synth.add_argument("--seed", type=int, default=0, help="random seed; same seed, same bytes")
     synth.set_defaults(run=_data_synth)
 
-    check = data.add_parser("check", help="validate every file of a dataset and report all problems at once")
+    check = data.add_parser(
+        "check", help="validate every file of a dataset and report all problems at once"
+    )
     check.add_argument("root", type=Path)
     _add_format_option(check)
     check.set_defaults(run=_data_check)
 
-    stats = data.add_parser("stats", help="compute normalization statistics from a split and save them next to the data")
+    stats = data.add_parser(
+        "stats", help="compute normalization statistics from a split and save them next to the data"
+    )
     stats.add_argument("root", type=Path)
     _add_format_option(stats)
     stats.add_argument("--split", default="train")
-    stats.add_argument("--out", type=Path, default=None, help="statistics folder (default: ROOT/stats)")
+    stats.add_argument(
+        "--out", type=Path, default=None, help="statistics folder (default: ROOT/stats)"
+    )
     stats.set_defaults(run=_data_stats)
 
-    item = data.add_parser("item", help="write one processed clip (augmentation off) to an .npz for inspection")
+    item = data.add_parser(
+        "item", help="write one processed clip (augmentation off) to an .npz for inspection"
+    )
     item.add_argument("root", type=Path)
     _add_format_option(item)
     item.add_argument("--split", default="test")

@@ -24,7 +24,11 @@ def instantiate_all(group: DictConfig | None) -> list[Any]:
     """Instantiate every ``_target_`` entry of a callbacks/logger group (None -> [])."""
     if not group:
         return []
-    return [instantiate(entry) for entry in group.values() if isinstance(entry, DictConfig) and "_target_" in entry]
+    return [
+        instantiate(entry)
+        for entry in group.values()
+        if isinstance(entry, DictConfig) and "_target_" in entry
+    ]
 
 
 def count_parameters(module: L.LightningModule) -> tuple[int, int]:
@@ -41,9 +45,14 @@ def train(cfg: DictConfig) -> dict[str, float]:
     datamodule = instantiate(cfg.data)
     model = instantiate(cfg.model)
     total, trainable = count_parameters(model)
-    log.info("%s: %.2fM parameters (%.2fM trainable)", type(model).__name__, total / 1e6, trainable / 1e6)
-    trainer = instantiate(cfg.trainer, callbacks=instantiate_all(cfg.get("callbacks")),
-                          logger=instantiate_all(cfg.get("logger")) or False)
+    log.info(
+        "%s: %.2fM parameters (%.2fM trainable)", type(model).__name__, total / 1e6, trainable / 1e6
+    )
+    trainer = instantiate(
+        cfg.trainer,
+        callbacks=instantiate_all(cfg.get("callbacks")),
+        logger=instantiate_all(cfg.get("logger")) or False,
+    )
     trainer.fit(model, datamodule=datamodule, ckpt_path=cfg.get("ckpt_path"))
     metrics = {name: float(value) for name, value in trainer.callback_metrics.items()}
     log.info("final metrics: %s", metrics)

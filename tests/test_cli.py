@@ -11,7 +11,23 @@ from intermask.cli import main
 
 def test_synth_check_stats_item_round_trip(tmp_path, capsys):
     root = tmp_path / "ih"
-    assert main(["data", "synth", "--out", str(root), "--format", "interhuman", "--clips", "12", "--seed", "3"]) == 0
+    assert (
+        main(
+            [
+                "data",
+                "synth",
+                "--out",
+                str(root),
+                "--format",
+                "interhuman",
+                "--clips",
+                "12",
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     assert "12 synthetic interhuman clips" in capsys.readouterr().out
     record = json.loads((root / "run_record.json").read_text())
     assert record["job"] == "data synth" and record["seed"] == 3 and "torch" in record["packages"]
@@ -27,18 +43,25 @@ def test_synth_check_stats_item_round_trip(tmp_path, capsys):
 
     clip = (root / "split" / "test.txt").read_text().split()[0]
     out = tmp_path / "clip.npz"
-    assert main(["data", "item", str(root), "--split", "test", "--id", clip, "--out", str(out)]) == 0
+    assert (
+        main(["data", "item", str(root), "--split", "test", "--id", clip, "--out", str(out)]) == 0
+    )
     item = np.load(out)
     length = int(item["length"])
     assert item["features"].shape == (2, length, 262) and item["joints"].shape == (length, 2, 22, 3)
-    np.testing.assert_allclose(item["joints"][0, 0, 0, [0, 2]], 0.0, atol=1e-5)  # person 1 root at origin
+    np.testing.assert_allclose(
+        item["joints"][0, 0, 0, [0, 2]], 0.0, atol=1e-5
+    )  # person 1 root at origin
     assert len(item["captions"]) == 3
 
 
 def test_check_reports_every_problem_and_fails(tmp_path, capsys):
     root = tmp_path / "ix"
-    main(["data", "synth", "--out", str(root), "--format", "interx", "--clips", "10", "--seed", "1"])
-    captions = sorted((root / "texts_processed").glob("*.txt"))
+    main(
+        ["data", "synth", "--out", str(root), "--format", "interx", "--clips", "10", "--seed", "1"]
+    )
+    train_ids = (root / "splits" / "train.txt").read_text().split()
+    captions = [root / "texts_processed" / f"{name}.txt" for name in train_ids[:2]]
     captions[0].unlink()
     captions[1].write_text("")
     capsys.readouterr()

@@ -33,7 +33,9 @@ def test_train_vq_composes_for_every_dataset(data):
 
 
 def test_data_config_instantiates_the_datamodule(tmp_path):
-    cfg = _compose("train_vq", ["data=synthetic", f"paths.data_dir={tmp_path}", "paths.output_dir=/tmp/unused"])
+    cfg = _compose(
+        "train_vq", ["data=synthetic", f"paths.data_dir={tmp_path}", "paths.output_dir=/tmp/unused"]
+    )
     datamodule = instantiate(cfg.data)
     assert isinstance(datamodule, InteractionDataModule)
     assert datamodule.root == tmp_path / "synthetic" / "interhuman"
@@ -43,7 +45,9 @@ def test_data_config_instantiates_the_datamodule(tmp_path):
 def test_unknown_keys_are_rejected():
     from hydra.errors import ConfigCompositionException
 
-    with pytest.raises(ConfigCompositionException, match="Could not override 'data.no_such_option'"):
+    with pytest.raises(
+        ConfigCompositionException, match="Could not override 'data.no_such_option'"
+    ):
         _compose("train_vq", ["data.no_such_option=1"])
 
 

@@ -50,11 +50,21 @@ def test_train_vq_writes_record_checkpoints_and_tensorboard(synthetic_interhuman
     accumulator = EventAccumulator(str(events[0].parent))
     accumulator.Reload()
     tags = set(accumulator.Tags()["scalars"])
-    expected = {"train/reconstruction", "train/velocity", "train/foot_contact", "train/bone_length",
-                "train/commitment", "codebook/usage_0", "codebook/perplexity_0", "val/mpjpe_mm"}
+    expected = {
+        "train/reconstruction",
+        "train/velocity",
+        "train/foot_contact",
+        "train/bone_length",
+        "train/commitment",
+        "codebook/usage_0",
+        "codebook/perplexity_0",
+        "val/mpjpe_mm",
+    }
     assert expected <= tags, expected - tags
     # the checkpoint carries the normalization statistics and loads with weights_only=True
-    state = torch.load(tmp_path / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True)["state_dict"]
+    state = torch.load(
+        tmp_path / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True
+    )["state_dict"]
     assert bool(state["net.view.has_statistics"]) and state["net.view.std"].shape == (262,)
     assert bool(state["net.quantizer.layers.0.initialized"])
 
@@ -86,4 +96,6 @@ def test_resume_from_last_continues_steps_and_schedule(synthetic_interhuman_root
     train(_config(synthetic_interhuman_root, tmp_path / "resumed", epochs + resume))
     reference, resumed = _last(tmp_path / "uninterrupted"), _last(tmp_path / "resumed")
     assert resumed["global_step"] == reference["global_step"] == 6
-    assert resumed["lr_schedulers"][0] == reference["lr_schedulers"][0]  # same point of the same schedule
+    assert (
+        resumed["lr_schedulers"][0] == reference["lr_schedulers"][0]
+    )  # same point of the same schedule

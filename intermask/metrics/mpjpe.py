@@ -9,8 +9,10 @@ from torchmetrics import Metric
 def per_joint_errors(prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """(..., J, 3) x2 -> (..., J) Euclidean distances."""
     if prediction.shape != target.shape or prediction.shape[-1] != 3:
-        raise ValueError(f"MPJPE needs two (..., J, 3) tensors of one shape, got {tuple(prediction.shape)} "
-                         f"and {tuple(target.shape)}")
+        raise ValueError(
+            f"MPJPE needs two (..., J, 3) tensors of one shape, got {tuple(prediction.shape)} "
+            f"and {tuple(target.shape)}"
+        )
     return torch.linalg.vector_norm(prediction - target, dim=-1)
 
 
@@ -27,10 +29,16 @@ class MPJPE(Metric):
     def __init__(self, *, scale: float = 1000.0) -> None:
         super().__init__()
         self.scale = scale
-        self.add_state("error_sum", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum")
-        self.add_state("count", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state(
+            "error_sum", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum"
+        )
+        self.add_state(
+            "count", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum"
+        )
 
-    def update(self, prediction: torch.Tensor, target: torch.Tensor, frame_mask: torch.Tensor | None = None) -> None:
+    def update(
+        self, prediction: torch.Tensor, target: torch.Tensor, frame_mask: torch.Tensor | None = None
+    ) -> None:
         errors = per_joint_errors(prediction.double(), target.double())  # (B, T, J)
         if frame_mask is not None:
             errors = errors[frame_mask]

@@ -49,7 +49,10 @@ _RIGHT_TIPS = _LEFT_TIPS + _TIPS
 
 def _raw_mirror_permutation() -> tuple[int, ...]:
     permutation = list(MIRROR_PERMUTATION) + list(range(NUM_JOINTS, NUM_RAW_JOINTS))
-    for left, right, count in ((_LEFT_HAND, _RIGHT_HAND, _HAND_JOINTS), (_LEFT_TIPS, _RIGHT_TIPS, _TIPS)):
+    for left, right, count in (
+        (_LEFT_HAND, _RIGHT_HAND, _HAND_JOINTS),
+        (_LEFT_TIPS, _RIGHT_TIPS, _TIPS),
+    ):
         for k in range(count):
             permutation[left + k], permutation[right + k] = right + k, left + k
     return tuple(permutation)
@@ -85,11 +88,13 @@ class FeatureParts(NamedTuple):
     contacts: torch.Tensor  # (..., 4) l_ankle, l_foot, r_ankle, r_foot
 
 
-def _check_last_dims(x: torch.Tensor, expected: tuple[int, ...], name: str, min_frames: int = 0) -> None:
+def _check_last_dims(
+    x: torch.Tensor, expected: tuple[int, ...], name: str, min_frames: int = 0
+) -> None:
     """Raise ValueError unless x is (..., *expected) with at least min_frames frames before them."""
     received = tuple(x.shape)
     dims = ", ".join(map(str, expected))
-    if len(received) < len(expected) or received[len(received) - len(expected):] != expected:
+    if len(received) < len(expected) or received[len(received) - len(expected) :] != expected:
         raise ValueError(f"{name}: expected shape (..., {dims}), got {received}")
     if min_frames == 0:
         return
@@ -139,7 +144,8 @@ def mirror_raw(raw: torch.Tensor) -> torch.Tensor:
     positions = mirror_joint_positions(positions, RAW_MIRROR_PERMUTATION)
     rot6d = mirror_joint_rot6d(rot6d, RAW_ROTATION_MIRROR_PERMUTATION)
     return torch.cat(
-        (rearrange(positions, "... j c -> ... (j c)"), rearrange(rot6d, "... j c -> ... (j c)")), dim=-1
+        (rearrange(positions, "... j c -> ... (j c)"), rearrange(rot6d, "... j c -> ... (j c)")),
+        dim=-1,
     )
 
 
@@ -206,7 +212,9 @@ def assemble_features(positions: torch.Tensor, rot6d: torch.Tensor) -> torch.Ten
     _check_last_dims(positions, (NUM_JOINTS, 3), "assemble_features", min_frames=2)
     _check_last_dims(rot6d, (NUM_ROTATIONS, 6), "assemble_features")
     velocities = positions[..., 1:, :, :] - positions[..., :-1, :, :]
-    parts = FeatureParts(positions[..., :-1, :, :], velocities, rot6d[..., :-1, :, :], foot_contacts(positions))
+    parts = FeatureParts(
+        positions[..., :-1, :, :], velocities, rot6d[..., :-1, :, :], foot_contacts(positions)
+    )
     return join_features(parts)
 
 
@@ -256,7 +264,9 @@ def to_reference_frame(
     return join_features(parts._replace(positions=positions, velocities=velocities))
 
 
-def interaction_features(raw1: torch.Tensor, raw2: torch.Tensor, mirror: bool = False) -> torch.Tensor:
+def interaction_features(
+    raw1: torch.Tensor, raw2: torch.Tensor, mirror: bool = False
+) -> torch.Tensor:
     """Two persons' (..., T, 492) raw rows -> (..., T-1, 2, 262).
 
     Person 1 is canonical (frame-0 root at the origin, facing +Z); person 2 is canonicalized on

@@ -24,7 +24,9 @@ NUM_ROWS = 56
 NUM_ROTATION_ROWS = 55
 TRANSLATION_ROW = 55
 NUM_PERSONS = 2
-RAW_CHANNELS = 6  # 3 per person in the release; [6D] or [translation, velocity] in the representation
+RAW_CHANNELS = (
+    6  # 3 per person in the release; [6D] or [translation, velocity] in the representation
+)
 BODY_ROWS = slice(0, NUM_JOINTS)  # global orient + 21 body joints = the SMPL 22-joint skeleton
 
 UpAxis = Literal["y", "z"]
@@ -33,7 +35,7 @@ Representation = Literal["interhuman", "interx"]
 
 def _check_last_dims(x: torch.Tensor, expected: tuple[int, ...], name: str) -> None:
     received = tuple(x.shape)
-    if len(received) < len(expected) or received[len(received) - len(expected):] != expected:
+    if len(received) < len(expected) or received[len(received) - len(expected) :] != expected:
         dims = ", ".join(map(str, expected))
         raise ValueError(f"{name}: expected shape (..., {dims}), got {received}")
 
@@ -48,11 +50,16 @@ def person_representation(axis_angle: torch.Tensor) -> torch.Tensor:
     """(..., T, 56, 3) one person's rows -> (..., T, 56, 6) generator representation."""
     _check_last_dims(axis_angle, (NUM_ROWS, 3), "person_representation")
     if axis_angle.ndim < 3:
-        raise ValueError(f"person_representation: expected (..., T, 56, 3), got {tuple(axis_angle.shape)}")
+        raise ValueError(
+            f"person_representation: expected (..., T, 56, 3), got {tuple(axis_angle.shape)}"
+        )
     rot6d = axis_angle_to_rot6d(axis_angle[..., :NUM_ROTATION_ROWS, :])  # (..., T, 55, 6)
     translation = axis_angle[..., TRANSLATION_ROW, :]  # (..., T, 3)
     velocity = torch.cat(
-        (translation[..., 1:, :] - translation[..., :-1, :], torch.zeros_like(translation[..., :1, :])),
+        (
+            translation[..., 1:, :] - translation[..., :-1, :],
+            torch.zeros_like(translation[..., :1, :]),
+        ),
         dim=-2,
     )
     root_row = torch.cat((translation, velocity), dim=-1)[..., None, :]  # (..., T, 1, 6)
@@ -90,7 +97,9 @@ def interhuman_joint_positions(features: torch.Tensor) -> torch.Tensor:
     """(..., P, T, 262) de-normalized features -> (..., T, P, 22, 3) joint positions."""
     _check_last_dims(features, (FEATURE_DIM,), "interhuman_joint_positions")
     if features.ndim < 3:
-        raise ValueError(f"interhuman_joint_positions: expected (..., P, T, 262), got {tuple(features.shape)}")
+        raise ValueError(
+            f"interhuman_joint_positions: expected (..., P, T, 262), got {tuple(features.shape)}"
+        )
     return rearrange(features_to_positions(features), "... p t j c -> ... t p j c")
 
 
@@ -122,4 +131,6 @@ def to_joint_positions(
         return interhuman_joint_positions(motion)
     if representation == "interx":
         return interx_joint_positions(motion, offsets=offsets, up_axis=up_axis)
-    raise ValueError(f"to_joint_positions: representation must be 'interhuman' or 'interx', got {representation!r}")
+    raise ValueError(
+        f"to_joint_positions: representation must be 'interhuman' or 'interx', got {representation!r}"
+    )

@@ -31,7 +31,9 @@ def forward_kinematics(
     """
     num_joints = len(parents)
     if local_rotations.shape[-3:] != (num_joints, 3, 3):
-        raise ValueError(f"local_rotations: expected (..., {num_joints}, 3, 3), got {tuple(local_rotations.shape)}")
+        raise ValueError(
+            f"local_rotations: expected (..., {num_joints}, 3, 3), got {tuple(local_rotations.shape)}"
+        )
     if offsets.shape[-2:] != (num_joints, 3):
         raise ValueError(f"offsets: expected (..., {num_joints}, 3), got {tuple(offsets.shape)}")
     if root_position.shape[-1] != 3:
@@ -53,4 +55,6 @@ def bone_lengths(positions: torch.Tensor, parents: tuple[int, ...] = PARENTS) ->
     """(..., J, 3) joint positions -> (..., J-1) length of the bone ending at each joint 1..J-1."""
     children = torch.arange(1, len(parents), device=positions.device)
     parent_index = torch.tensor(parents[1:], device=positions.device)
-    return torch.linalg.vector_norm(positions[..., children, :] - positions[..., parent_index, :], dim=-1)
+    return torch.linalg.vector_norm(
+        positions[..., children, :] - positions[..., parent_index, :], dim=-1
+    )

@@ -37,7 +37,9 @@ ROTATION_MIRROR_PERMUTATION: tuple[int, ...] = tuple(
 )
 
 
-def _check_permutation(x: torch.Tensor, permutation: Sequence[int], channels: int, name: str) -> None:
+def _check_permutation(
+    x: torch.Tensor, permutation: Sequence[int], channels: int, name: str
+) -> None:
     expected = (len(permutation), channels)
     if x.ndim < 2 or tuple(x.shape[-2:]) != expected:
         raise ValueError(

@@ -22,8 +22,10 @@ _AXES = {"x": 0, "y": 1, "z": 2}
 
 
 def _check_last_dims(x: torch.Tensor, expected: tuple[int, ...], name: str) -> None:
-    if tuple(x.shape[len(x.shape) - len(expected):]) != expected:
-        raise ValueError(f"{name}: expected shape (..., {', '.join(map(str, expected))}), got {tuple(x.shape)}")
+    if tuple(x.shape[len(x.shape) - len(expected) :]) != expected:
+        raise ValueError(
+            f"{name}: expected shape (..., {', '.join(map(str, expected))}), got {tuple(x.shape)}"
+        )
 
 
 def _check_layout(layout: str) -> None:
@@ -61,9 +63,15 @@ def quaternion_to_matrix(quaternion: torch.Tensor) -> torch.Tensor:
     w, x, y, z = F.normalize(quaternion, dim=-1).unbind(-1)
     matrix = torch.stack(
         (
-            1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
-            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
-            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - z * w),
+            2 * (x * z + y * w),
+            2 * (x * y + z * w),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - x * w),
+            2 * (x * z - y * w),
+            2 * (y * z + x * w),
+            1 - 2 * (x * x + y * y),
         ),
         dim=-1,
     )
@@ -93,7 +101,9 @@ def matrix_to_quaternion(matrix: torch.Tensor) -> torch.Tensor:
         dim=-2,
     ) / (2 * root[..., None])  # (..., 4 candidates, 4)
     best = four_squares.argmax(dim=-1)
-    quaternion = torch.gather(candidates, -2, best[..., None, None].expand(*best.shape, 1, 4)).squeeze(-2)
+    quaternion = torch.gather(
+        candidates, -2, best[..., None, None].expand(*best.shape, 1, 4)
+    ).squeeze(-2)
     quaternion = F.normalize(quaternion, dim=-1)
     return torch.where(quaternion[..., :1] < 0, -quaternion, quaternion)
 
@@ -132,7 +142,9 @@ def matrix_to_axis_angle(matrix: torch.Tensor) -> torch.Tensor:
     return quaternion_to_axis_angle(matrix_to_quaternion(matrix))
 
 
-def axis_angle_to_rot6d(axis_angle: torch.Tensor, layout: Rot6dLayout = ROT6D_LAYOUT) -> torch.Tensor:
+def axis_angle_to_rot6d(
+    axis_angle: torch.Tensor, layout: Rot6dLayout = ROT6D_LAYOUT
+) -> torch.Tensor:
     """(..., 3) -> (..., 6)."""
     return matrix_to_rot6d(axis_angle_to_matrix(axis_angle), layout)
 
@@ -175,8 +187,12 @@ def rotation_about_axis(angle: torch.Tensor, axis: Literal["x", "y", "z"]) -> to
     if axis not in _AXES:
         raise ValueError(f"unknown axis {axis!r}; expected one of 'x', 'y', 'z'")
     angle = torch.as_tensor(angle)
-    axis_angle = torch.zeros(*angle.shape, 3, dtype=angle.dtype if angle.is_floating_point() else torch.float32,
-                             device=angle.device)
+    axis_angle = torch.zeros(
+        *angle.shape,
+        3,
+        dtype=angle.dtype if angle.is_floating_point() else torch.float32,
+        device=angle.device,
+    )
     axis_angle[..., _AXES[axis]] = angle
     return axis_angle_to_matrix(axis_angle)
 
@@ -189,8 +205,11 @@ def geodesic_angle(matrix1: torch.Tensor, matrix2: torch.Tensor) -> torch.Tensor
     relative = matrix1.transpose(-1, -2) @ matrix2
     cos = (relative.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
     skew = torch.stack(
-        (relative[..., 2, 1] - relative[..., 1, 2], relative[..., 0, 2] - relative[..., 2, 0],
-         relative[..., 1, 0] - relative[..., 0, 1]),
+        (
+            relative[..., 2, 1] - relative[..., 1, 2],
+            relative[..., 0, 2] - relative[..., 2, 0],
+            relative[..., 1, 0] - relative[..., 0, 1],
+        ),
         dim=-1,
     )
     sin = torch.linalg.vector_norm(skew, dim=-1) / 2

@@ -18,8 +18,19 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 RECORDED_PACKAGES = (
-    "intermask", "torch", "torchvision", "lightning", "torchmetrics", "hydra-core", "omegaconf",
-    "tensorboard", "open_clip_torch", "scipy", "numpy", "h5py", "einops",
+    "intermask",
+    "torch",
+    "torchvision",
+    "lightning",
+    "torchmetrics",
+    "hydra-core",
+    "omegaconf",
+    "tensorboard",
+    "open_clip_torch",
+    "scipy",
+    "numpy",
+    "h5py",
+    "einops",
 )
 
 
@@ -28,11 +39,20 @@ def git_revision(repo_dir: Path | None = None) -> str:
     cwd = repo_dir or Path(__file__).resolve().parents[2]
     try:
         commit = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, check=True, timeout=10
+            ["git", "rev-parse", "HEAD"],
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=10,
         ).stdout.strip()
         dirty = subprocess.run(
             ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=cwd, capture_output=True, text=True, check=True, timeout=10,
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=10,
         ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
@@ -51,7 +71,9 @@ def package_versions(names: tuple[str, ...] = RECORDED_PACKAGES) -> dict[str, st
 
 
 def write_run_record(
-    output_dir: Path | str, config: DictConfig | dict[str, Any] | None = None, extra: dict[str, Any] | None = None
+    output_dir: Path | str,
+    config: DictConfig | dict[str, Any] | None = None,
+    extra: dict[str, Any] | None = None,
 ) -> Path:
     """Write ``config.yaml`` (resolved) and ``run_record.json`` into ``output_dir``; return the json path."""
     output_dir = Path(output_dir)

@@ -7,7 +7,12 @@ from collections.abc import Sequence
 
 
 def warmup_multistep_factor(
-    step: int, *, total_steps: int, warmup_fraction: float, milestones: Sequence[float], gamma: float
+    step: int,
+    *,
+    total_steps: int,
+    warmup_fraction: float,
+    milestones: Sequence[float],
+    gamma: float,
 ) -> float:
     """Multiplier of the base learning rate at ``step``.
 

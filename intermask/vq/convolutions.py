@@ -17,9 +17,15 @@ from torch import nn
 TokenLayout = Literal["2d", "1d"]
 
 
-def _conv(layout: TokenLayout, in_channels: int, out_channels: int, kernel: tuple[int, int],
-          stride: tuple[int, int] = (1, 1), padding: tuple[int, int] = (1, 1),
-          dilation: tuple[int, int] = (1, 1)) -> nn.Module:
+def _conv(
+    layout: TokenLayout,
+    in_channels: int,
+    out_channels: int,
+    kernel: tuple[int, int],
+    stride: tuple[int, int] = (1, 1),
+    padding: tuple[int, int] = (1, 1),
+    dilation: tuple[int, int] = (1, 1),
+) -> nn.Module:
     """A Conv2d over (joints, time), or its Conv1d restriction to time for the 1D layout."""
     if layout == "2d":
         return nn.Conv2d(in_channels, out_channels, kernel, stride, padding, dilation)
@@ -33,7 +39,14 @@ class ResidualBlock(nn.Module):
         super().__init__()
         self.body = nn.Sequential(
             nn.ReLU(),
-            _conv(layout, width, width, (3, 3), padding=(dilation, dilation), dilation=(dilation, dilation)),
+            _conv(
+                layout,
+                width,
+                width,
+                (3, 3),
+                padding=(dilation, dilation),
+                dilation=(dilation, dilation),
+            ),
             nn.ReLU(),
             _conv(layout, width, width, (1, 1), padding=(0, 0)),
             nn.Dropout(dropout),
@@ -43,8 +56,12 @@ class ResidualBlock(nn.Module):
         return x + self.body(x)
 
 
-def residual_stack(*, width: int, dilations: tuple[int, ...], dropout: float, layout: TokenLayout) -> nn.Sequential:
-    return nn.Sequential(*(ResidualBlock(width=width, dilation=d, dropout=dropout, layout=layout) for d in dilations))
+def residual_stack(
+    *, width: int, dilations: tuple[int, ...], dropout: float, layout: TokenLayout
+) -> nn.Sequential:
+    return nn.Sequential(
+        *(ResidualBlock(width=width, dilation=d, dropout=dropout, layout=layout) for d in dilations)
+    )
 
 
 def _to_grid(x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
@@ -77,7 +94,9 @@ class MotionEncoder(nn.Module):
             for _ in range(2)
             for layer in (
                 _conv(layout, width, width, (joint_kernel, 4), stride=(joint_stride, 2)),
-                residual_stack(width=width, dilations=tuple(dilations), dropout=dropout, layout=layout),
+                residual_stack(
+                    width=width, dilations=tuple(dilations), dropout=dropout, layout=layout
+                ),
             )
         ]
         self.net = nn.Sequential(
@@ -127,7 +146,12 @@ class MotionDecoder(nn.Module):
         for scale in joint_scales:
             time_only = layout == "1d"
             stages += [
-                residual_stack(width=width, dilations=tuple(reversed(dilations)), dropout=dropout, layout=layout),
+                residual_stack(
+                    width=width,
+                    dilations=tuple(reversed(dilations)),
+                    dropout=dropout,
+                    layout=layout,
+                ),
                 nn.Upsample(scale_factor=2.0 if time_only else (float(scale), 2.0), mode="nearest"),
                 _conv(layout, width, width, (3, 3)),
             ]

@@ -46,7 +46,9 @@ class LossTerms(NamedTuple):
     commitment: torch.Tensor
 
 
-def elementwise_loss(prediction: torch.Tensor, target: torch.Tensor, kind: LossKind) -> torch.Tensor:
+def elementwise_loss(
+    prediction: torch.Tensor, target: torch.Tensor, kind: LossKind
+) -> torch.Tensor:
     if kind == "smooth_l1":
         return F.smooth_l1_loss(prediction, target, reduction="none")
     if kind == "l1":
@@ -82,8 +84,12 @@ def vq_losses(
     Terms whose geometry is missing (Inter-X without a body model) are 0.
     """
     zero = prediction.new_zeros(())
-    reconstruction = _masked_mean(elementwise_loss(prediction, target, kind)[..., reconstruction_mask], frame_mask)
-    angles = geodesic_angle(rot6d_to_matrix(predicted_geometry.rot6d), rot6d_to_matrix(target_geometry.rot6d))
+    reconstruction = _masked_mean(
+        elementwise_loss(prediction, target, kind)[..., reconstruction_mask], frame_mask
+    )
+    angles = geodesic_angle(
+        rot6d_to_matrix(predicted_geometry.rot6d), rot6d_to_matrix(target_geometry.rot6d)
+    )
     geodesic = _masked_mean(angles, frame_mask)  # mean rotation error in radians
     positions = velocity = bones = foot_contact = zero
     if predicted_geometry.positions is not None and target_geometry.positions is not None:
@@ -92,13 +98,16 @@ def vq_losses(
         step_mask = frame_mask[:, 1:] & frame_mask[:, :-1]
         predicted_step, real_step = predicted[:, 1:] - predicted[:, :-1], real[:, 1:] - real[:, :-1]
         velocity = _masked_mean(elementwise_loss(predicted_step, real_step, kind), step_mask)
-        bones = _masked_mean(elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask)
+        bones = _masked_mean(
+            elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
+        )
         if target_geometry.contacts is not None:
             # planted feet (GT label) must not slide in the reconstruction
             feet_step = predicted_step[:, :, list(FOOT_JOINTS)]  # (B, T-1, 4, 3)
             planted = target_geometry.contacts[:, :-1, :, None]
-            foot_contact = _masked_mean(elementwise_loss(feet_step * planted, torch.zeros_like(feet_step), kind),
-                                        step_mask)
+            foot_contact = _masked_mean(
+                elementwise_loss(feet_step * planted, torch.zeros_like(feet_step), kind), step_mask
+            )
     total = (
         weights.reconstruction * reconstruction
         + weights.positions * positions
@@ -108,4 +117,6 @@ def vq_losses(
         + weights.foot_contact * foot_contact
         + weights.commitment * commit_loss
     )
-    return LossTerms(total, reconstruction, positions, velocity, bones, geodesic, foot_contact, commit_loss)
+    return LossTerms(
+        total, reconstruction, positions, velocity, bones, geodesic, foot_contact, commit_loss
+    )

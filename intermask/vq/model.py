@@ -26,8 +26,14 @@ class MotionVQVAE(nn.Module):
     of 4 (the two stride-2 stages).
     """
 
-    def __init__(self, *, view: nn.Module, encoder: MotionEncoder, quantizer: ResidualQuantizer,
-                 decoder: MotionDecoder) -> None:
+    def __init__(
+        self,
+        *,
+        view: nn.Module,
+        encoder: MotionEncoder,
+        quantizer: ResidualQuantizer,
+        decoder: MotionDecoder,
+    ) -> None:
         super().__init__()
         self.view, self.encoder, self.quantizer, self.decoder = view, encoder, quantizer, decoder
 
@@ -42,8 +48,13 @@ class MotionVQVAE(nn.Module):
         latent = self.encoder(self.view.to_joints(features))
         quantized = self.quantizer(latent)
         reconstruction = self.view.from_joints(self.decoder(quantized.quantized))
-        return VQVAEOutput(reconstruction, quantized.indices, quantized.commit_loss, quantized.perplexity,
-                           quantized.dead_codes)
+        return VQVAEOutput(
+            reconstruction,
+            quantized.indices,
+            quantized.commit_loss,
+            quantized.perplexity,
+            quantized.dead_codes,
+        )
 
     @torch.no_grad()
     def encode(self, features: torch.Tensor) -> torch.Tensor:

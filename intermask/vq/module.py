@@ -47,13 +47,21 @@ class VQVAEModule(L.LightningModule):
         super().__init__()
         self.net = net
         self.optimizer_factory = optimizer
-        self.loss_weights = loss_weights if isinstance(loss_weights, LossWeights) else LossWeights(**(loss_weights or {}))
+        self.loss_weights = (
+            loss_weights
+            if isinstance(loss_weights, LossWeights)
+            else LossWeights(**(loss_weights or {}))
+        )
         self.loss_kind = loss_kind
         # plain Python values only, so checkpoints load with torch.load(weights_only=True)
         self.save_hyperparameters(
-            {"loss_weights": asdict(self.loss_weights), "loss_kind": str(loss_kind),
-             "warmup_fraction": float(warmup_fraction), "lr_milestones": [float(m) for m in lr_milestones],
-             "lr_gamma": float(lr_gamma)},
+            {
+                "loss_weights": asdict(self.loss_weights),
+                "loss_kind": str(loss_kind),
+                "warmup_fraction": float(warmup_fraction),
+                "lr_milestones": [float(m) for m in lr_milestones],
+                "lr_gamma": float(lr_gamma),
+            },
             logger=False,
         )
         self.val_mpjpe = MPJPE(scale=1000.0)
@@ -63,9 +71,13 @@ class VQVAEModule(L.LightningModule):
         """Copy the datamodule's normalization statistics into the view (then they live in checkpoints)."""
         view = self.net.view
         if isinstance(view, InterHumanView) and not bool(view.has_statistics):
-            normalizer = getattr(self.trainer.datamodule, "normalizer", None) if self.trainer else None
+            normalizer = (
+                getattr(self.trainer.datamodule, "normalizer", None) if self.trainer else None
+            )
             if normalizer is None:
-                raise RuntimeError("the InterHuman VQ needs normalization statistics: the datamodule exposes none")
+                raise RuntimeError(
+                    "the InterHuman VQ needs normalization statistics: the datamodule exposes none"
+                )
             view.set_statistics(normalizer.mean, normalizer.std)
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:
@@ -80,23 +92,36 @@ class VQVAEModule(L.LightningModule):
         view = self.net.view
         predicted, real = view.geometry(out.reconstruction), view.geometry(motion)
         if real.positions is None and not self._warned_no_positions:
-            log.info("no body model for this representation: position, velocity, bone and foot losses are off")
+            log.info(
+                "no body model for this representation: position, velocity, bone and foot losses are off"
+            )
             self._warned_no_positions = True
         terms = vq_losses(
-            prediction=out.reconstruction, target=motion, predicted_geometry=predicted, target_geometry=real,
-            reconstruction_mask=view.reconstruction_mask(motion.device), frame_mask=frame_mask,
-            commit_loss=out.commit_loss, weights=self.loss_weights, kind=self.loss_kind,
+            prediction=out.reconstruction,
+            target=motion,
+            predicted_geometry=predicted,
+            target_geometry=real,
+            reconstruction_mask=view.reconstruction_mask(motion.device),
+            frame_mask=frame_mask,
+            commit_loss=out.commit_loss,
+            weights=self.loss_weights,
+            kind=self.loss_kind,
         )
         return terms, frame_mask, out, (predicted, real)
 
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         terms, _, out, _ = self._step(batch)
         batch_size = batch["motion"].shape[0]
-        self.log_dict({f"train/{name}": value for name, value in terms._asdict().items()}, batch_size=batch_size,
-                      prog_bar=False)
+        self.log_dict(
+            {f"train/{name}": value for name, value in terms._asdict().items()},
+            batch_size=batch_size,
+            prog_bar=False,
+        )
         self.log("train/loss", terms.total, batch_size=batch_size, prog_bar=True)
         codebook_size = self.net.quantizer.layers[0].codebook_size
-        for layer, (perplexity, dead) in enumerate(zip(out.perplexity, out.dead_codes, strict=True)):
+        for layer, (perplexity, dead) in enumerate(
+            zip(out.perplexity, out.dead_codes, strict=True)
+        ):
             self.log(f"codebook/perplexity_{layer}", perplexity, batch_size=batch_size)
             self.log(f"codebook/dead_codes_{layer}", dead.float(), batch_size=batch_size)
             used = torch.unique(out.indices[:, layer][out.indices[:, layer] >= 0]).numel()
@@ -107,7 +132,13 @@ class VQVAEModule(L.LightningModule):
         terms, frame_mask, _, (predicted, real) = self._step(batch)
         batch_size = batch["motion"].shape[0]
         self.log("val/loss", terms.total, batch_size=batch_size, sync_dist=True)
-        self.log("val/reconstruction", terms.reconstruction, batch_size=batch_size, sync_dist=True, prog_bar=True)
+        self.log(
+            "val/reconstruction",
+            terms.reconstruction,
+            batch_size=batch_size,
+            sync_dist=True,
+            prog_bar=True,
+        )
         if real.positions is not None:
             self.val_mpjpe.update(predicted.positions, real.positions, frame_mask)
             self.log("val/mpjpe_mm", self.val_mpjpe, batch_size=batch_size, prog_bar=True)
@@ -115,8 +146,13 @@ class VQVAEModule(L.LightningModule):
     def configure_optimizers(self) -> dict[str, Any]:
         optimizer = self.optimizer_factory(params=self.parameters())
         schedule = partial(
-            warmup_multistep_factor, total_steps=max(int(self.trainer.estimated_stepping_batches), 1),
-            warmup_fraction=self.hparams.warmup_fraction, milestones=tuple(self.hparams.lr_milestones),
+            warmup_multistep_factor,
+            total_steps=max(int(self.trainer.estimated_stepping_batches), 1),
+            warmup_fraction=self.hparams.warmup_fraction,
+            milestones=tuple(self.hparams.lr_milestones),
             gamma=self.hparams.lr_gamma,
         )
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": LambdaLR(optimizer, schedule), "interval": "step"}}
+        return {
+            "optimizer": optimizer,
+            "lr_scheduler": {"scheduler": LambdaLR(optimizer, schedule), "interval": "step"},
+        }

@@ -74,9 +74,15 @@ class EMAQuantizer(nn.Module):
         if not 0.0 < decay < 1.0:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
         if stochastic_temperature is not None and stochastic_temperature <= 0:
-            raise ValueError(f"stochastic_temperature must be positive or None, got {stochastic_temperature}")
+            raise ValueError(
+                f"stochastic_temperature must be positive or None, got {stochastic_temperature}"
+            )
         self.codebook_size, self.dim, self.decay = codebook_size, dim, decay
-        self.reset_threshold, self.stochastic_temperature, self.eps = reset_threshold, stochastic_temperature, eps
+        self.reset_threshold, self.stochastic_temperature, self.eps = (
+            reset_threshold,
+            stochastic_temperature,
+            eps,
+        )
         self.register_buffer("codebook", torch.zeros(codebook_size, dim))
         self.register_buffer("ema_count", torch.zeros(codebook_size))
         self.register_buffer("ema_sum", torch.zeros(codebook_size, dim))
@@ -97,14 +103,18 @@ class EMAQuantizer(nn.Module):
         quantized_flat = flat + (quantized_flat - flat).detach()
         quantized = rearrange(quantized_flat, "(b h w) d -> b d h w", b=batch, h=height, w=width)
         indices = rearrange(indices, "(b h w) -> b h w", b=batch, h=height, w=width)
-        return QuantizerOutput(quantized, indices, commit_loss, _perplexity(indices, self.codebook_size), dead)
+        return QuantizerOutput(
+            quantized, indices, commit_loss, _perplexity(indices, self.codebook_size), dead
+        )
 
     @torch.no_grad()
     def nearest(self, x: torch.Tensor) -> torch.Tensor:
         """(B, D, H, W) -> (B, H, W) nearest-code indices; never updates the codebook."""
         batch, _, height, width = x.shape
         flat = rearrange(x, "b d h w -> (b h w) d")
-        return rearrange(self._distances(flat).argmin(dim=-1), "(b h w) -> b h w", b=batch, h=height, w=width)
+        return rearrange(
+            self._distances(flat).argmin(dim=-1), "(b h w) -> b h w", b=batch, h=height, w=width
+        )
 
     def lookup(self, indices: torch.Tensor) -> torch.Tensor:
         """(B, H, W) code indices -> (B, D, H, W) code vectors."""
@@ -113,14 +123,20 @@ class EMAQuantizer(nn.Module):
     def _distances(self, flat: torch.Tensor) -> torch.Tensor:
         """(N, D) -> (N, K) squared Euclidean distances to every code."""
         codebook = self.codebook.to(flat.dtype)
-        return flat.pow(2).sum(-1, keepdim=True) - 2 * flat @ codebook.T + codebook.pow(2).sum(-1)[None]
+        return (
+            flat.pow(2).sum(-1, keepdim=True)
+            - 2 * flat @ codebook.T
+            + codebook.pow(2).sum(-1)[None]
+        )
 
     @torch.no_grad()
     def _assign(self, flat: torch.Tensor) -> torch.Tensor:
         """(N, D) -> (N,) code indices: Gumbel-max sampling in training when configured, else nearest."""
         distances = self._distances(flat)
         if self.training and self.stochastic_temperature is not None:
-            gumbel = -torch.log(-torch.log(torch.rand_like(distances).clamp_min(1e-10)).clamp_min(1e-10))
+            gumbel = -torch.log(
+                -torch.log(torch.rand_like(distances).clamp_min(1e-10)).clamp_min(1e-10)
+            )
             return torch.argmax(-distances / self.stochastic_temperature + gumbel, dim=-1)
         return torch.argmin(distances, dim=-1)
 
@@ -185,8 +201,13 @@ class ResidualQuantizer(nn.Module):
             raise ValueError(f"dropout_prob must be in [0, 1], got {dropout_prob}")
         self.dropout_prob = dropout_prob
         self.layers = nn.ModuleList(
-            EMAQuantizer(codebook_size=codebook_size, dim=dim, decay=decay, reset_threshold=reset_threshold,
-                         stochastic_temperature=stochastic_temperature)
+            EMAQuantizer(
+                codebook_size=codebook_size,
+                dim=dim,
+                decay=decay,
+                reset_threshold=reset_threshold,
+                stochastic_temperature=stochastic_temperature,
+            )
             for _ in range(num_quantizers)
         )
 
@@ -197,7 +218,12 @@ class ResidualQuantizer(nn.Module):
     def forward(self, x: torch.Tensor, active_layers: int | None = None) -> ResidualQuantizerOutput:
         """(B, D, H, W) -> ResidualQuantizerOutput. ``active_layers`` forces the number of layers used."""
         kept = active_layers or self.num_quantizers
-        if active_layers is None and self.training and self.num_quantizers > 1 and self.dropout_prob > 0:
+        if (
+            active_layers is None
+            and self.training
+            and self.num_quantizers > 1
+            and self.dropout_prob > 0
+        ):
             if torch.rand(()) < self.dropout_prob:
                 kept = int(torch.randint(1, self.num_quantizers + 1, ()))
         residual, quantized = x, torch.zeros_like(x)
@@ -230,7 +256,9 @@ class ResidualQuantizer(nn.Module):
     def lookup(self, indices: torch.Tensor) -> torch.Tensor:
         """(B, Q', H, W) indices of the first Q' <= Q layers (-1 = unused) -> (B, D, H, W) summed codes."""
         if indices.shape[1] > self.num_quantizers:
-            raise ValueError(f"indices have {indices.shape[1]} layers, the quantizer has {self.num_quantizers}")
+            raise ValueError(
+                f"indices have {indices.shape[1]} layers, the quantizer has {self.num_quantizers}"
+            )
         total = None
         for layer_index in range(indices.shape[1]):
             layer_indices = indices[:, layer_index]

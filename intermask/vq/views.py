@@ -19,7 +19,9 @@ from intermask.motion.skeleton import NUM_JOINTS
 
 
 class Geometry(NamedTuple):
-    positions: torch.Tensor | None  # (B, T, 22, 3) metres, None when the representation has no positions
+    positions: (
+        torch.Tensor | None
+    )  # (B, T, 22, 3) metres, None when the representation has no positions
     rot6d: torch.Tensor  # (B, T, R, 6) local rotations in the "rows" 6D layout
     contacts: torch.Tensor | None  # (B, T, 4) in {0, 1} (l_ankle, l_foot, r_ankle, r_foot) or None
 
@@ -31,7 +33,9 @@ class InterHumanView(nn.Module):
     channels = ih.JOINT_VIEW_CHANNELS
     feature_shape = (ih.FEATURE_DIM,)
 
-    def __init__(self, *, mean: torch.Tensor | None = None, std: torch.Tensor | None = None) -> None:
+    def __init__(
+        self, *, mean: torch.Tensor | None = None, std: torch.Tensor | None = None
+    ) -> None:
         """Statistics may come later (``set_statistics``, called with the datamodule's); a
         checkpoint restores them with the weights."""
         super().__init__()
@@ -44,9 +48,14 @@ class InterHumanView(nn.Module):
             self.set_statistics(mean, std)
 
     def set_statistics(self, mean: torch.Tensor, std: torch.Tensor) -> None:
-        mean, std = torch.as_tensor(mean, dtype=torch.float32), torch.as_tensor(std, dtype=torch.float32)
+        mean, std = (
+            torch.as_tensor(mean, dtype=torch.float32),
+            torch.as_tensor(std, dtype=torch.float32),
+        )
         if mean.shape != self.feature_shape or std.shape != self.feature_shape:
-            raise ValueError(f"InterHuman statistics must have shape (262,), got {tuple(mean.shape)} and {tuple(std.shape)}")
+            raise ValueError(
+                f"InterHuman statistics must have shape (262,), got {tuple(mean.shape)} and {tuple(std.shape)}"
+            )
         self.mean.copy_(mean)
         self.std.copy_(std)
         self.has_statistics.fill_(True)
@@ -91,7 +100,9 @@ class InterXView(nn.Module):
         if body_offsets is not None:
             body_offsets = torch.as_tensor(body_offsets, dtype=torch.float32)
             if body_offsets.shape != (NUM_JOINTS, 3):
-                raise ValueError(f"body_offsets must have shape (22, 3), got {tuple(body_offsets.shape)}")
+                raise ValueError(
+                    f"body_offsets must have shape (22, 3), got {tuple(body_offsets.shape)}"
+                )
         self.register_buffer("body_offsets", body_offsets)
 
     @property
@@ -116,5 +127,7 @@ class InterXView(nn.Module):
             return Geometry(None, rot6d, None)
         positions = ix.interx_positions(features, offsets=self.body_offsets, up_axis=self.up_axis)
         contacts = ih.foot_contacts(positions)
-        contacts = torch.cat((contacts, contacts[..., -1:, :]), dim=-2)  # repeat the last frame's label
+        contacts = torch.cat(
+            (contacts, contacts[..., -1:, :]), dim=-2
+        )  # repeat the last frame's label
         return Geometry(positions, rot6d, contacts)

@@ -34,7 +34,9 @@ def test_synthetic_interhuman_is_valid_and_canonical(synthetic_interhuman_root):
 
 
 def test_synthetic_interhuman_datamodule(synthetic_interhuman_root):
-    dm = InteractionDataModule(dataset="interhuman", root=str(synthetic_interhuman_root), batch_size=4)
+    dm = InteractionDataModule(
+        dataset="interhuman", root=str(synthetic_interhuman_root), batch_size=4
+    )
     dm.prepare_data()
     dm.setup("fit")
     batch = next(iter(dm.train_dataloader()))

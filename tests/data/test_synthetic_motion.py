@@ -7,14 +7,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
-from intermask.data.synthetic import CONTACT_ACTIONS, generate_dataset
+from intermask.data.synthetic import ACTIONS, CONTACT_ACTIONS, generate_clip, generate_dataset
+from intermask.motion.rotations import matrix_to_axis_angle
 from intermask.motion.skeleton import PARENTS
 
 CLIPS = 42  # three of each of the 14 interactions
 SEED = 11
 FPS = 30
-MOVING = 0.1  # m/s: a joint faster than this is moving (the idle sway stays below 0.02)
+MOVING = 0.1  # m/s: a joint faster than this is moving (the idle sway stays below 0.06)
+ROTATION_SPREAD = 0.02  # rad: std of a joint's rotation about one axis that counts as turning
 
 
 class Clip:
@@ -156,3 +159,20 @@ def test_people_face_each_other_at_the_start(clips: list[Clip]) -> None:
                 / np.linalg.norm(to_other[[0, 2]])
             )
             assert cos > 0.95, clip.action
+
+
+def _relative_axis_angles(rotations: torch.Tensor) -> torch.Tensor:
+    """(N, 3, 3) rotations -> (N, 3) axis-angles relative to their chordal mean rotation."""
+    u, _, vh = torch.linalg.svd(rotations.mean(0))
+    mean = u @ torch.diag(torch.tensor([1.0, 1.0, float(torch.det(u @ vh))], dtype=u.dtype)) @ vh
+    return matrix_to_axis_angle(mean.T @ rotations)
+
+
+def test_every_joint_turns_about_at_least_two_axes() -> None:
+    """Planar motion (hips and knees only bending forward, wrists, feet and collars never turning)
+    leaves whole rotation channels constant, which normalization then has to floor."""
+    clips = [generate_clip(seed=SEED, index=i, action=action) for i, action in enumerate(ACTIONS)]
+    local = torch.cat([c.local_rotations.flatten(0, 1) for c in clips])  # (N, 22, 3, 3)
+    for joint in range(1, 22):
+        spread = _relative_axis_angles(local[:, joint]).std(0)  # (3,) radians
+        assert (spread > ROTATION_SPREAD).sum() >= 2, (joint, spread.tolist())

@@ -21,5 +21,8 @@ def test_mpjpe_matches_numpy_and_ignores_masked_frames():
 def test_mpjpe_errors():
     with pytest.raises(ValueError, match=r"MPJPE needs two \(\.\.\., J, 3\) tensors of one shape"):
         MPJPE().update(torch.zeros(2, 22, 3), torch.zeros(2, 21, 3))
-    with pytest.raises(ValueError, match="before any update"), pytest.warns(UserWarning, match="before the ``update``"):
+    with (
+        pytest.raises(ValueError, match="before any update"),
+        pytest.warns(UserWarning, match="before the ``update``"),
+    ):
         MPJPE().compute()

@@ -17,6 +17,7 @@ def generator() -> torch.Generator:
 @pytest.fixture
 def make_motion(generator: torch.Generator) -> Callable[..., SkeletonMotion]:
     """make_motion(frames=24, yaw=None, root_xz=None) -> SkeletonMotion (fresh random draw per call)."""
+
     def make(**kwargs) -> SkeletonMotion:
         return random_motion(generator, **kwargs)
 
@@ -24,8 +25,11 @@ def make_motion(generator: torch.Generator) -> Callable[..., SkeletonMotion]:
 
 
 @pytest.fixture
-def make_built_motion(generator: torch.Generator) -> Callable[[torch.Tensor, torch.Tensor], SkeletonMotion]:
+def make_built_motion(
+    generator: torch.Generator,
+) -> Callable[[torch.Tensor, torch.Tensor], SkeletonMotion]:
     """make_built_motion(local_rotations (T, 22, 3, 3), root_position (T, 3)) -> SkeletonMotion."""
+
     def make(local_rotations: torch.Tensor, root_position: torch.Tensor) -> SkeletonMotion:
         return build_motion(local_rotations, root_position, generator)
 

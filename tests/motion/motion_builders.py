@@ -28,17 +28,25 @@ class SkeletonMotion(NamedTuple):
     raw: torch.Tensor  # (T, 492) InterHuman raw rows (Z-up), hands filled with random valid data
 
 
-def raw_rows(local_rotations: torch.Tensor, positions: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+def raw_rows(
+    local_rotations: torch.Tensor, positions: torch.Tensor, generator: torch.Generator
+) -> torch.Tensor:
     """Assemble (T, 492) raw rows: 62 Z-up joint positions, then 51 6D local rotations."""
     frames = positions.shape[0]
     body = positions @ YUP_TO_ZUP.T  # (T, 22, 3)
     wrists = body[:, [20] * 15 + [21] * 15, :]  # hand joints 22..51 near the left/right wrists
     hands = torch.cat((wrists, body[:, [20] * 5 + [21] * 5, :]), dim=1)  # + 5 + 5 finger tips
     hands = hands + 0.05 * torch.rand(frames, 40, 3, generator=generator, dtype=torch.float64)
-    hand_rotations = axis_angle_to_matrix(0.3 * torch.randn(frames, 30, 3, generator=generator, dtype=torch.float64))
+    hand_rotations = axis_angle_to_matrix(
+        0.3 * torch.randn(frames, 30, 3, generator=generator, dtype=torch.float64)
+    )
     rotations = torch.cat((local_rotations[:, 1:], hand_rotations), dim=1)  # joints 1..51
     return torch.cat(
-        (body.reshape(frames, -1), hands.reshape(frames, -1), matrix_to_rot6d(rotations).reshape(frames, -1)),
+        (
+            body.reshape(frames, -1),
+            hands.reshape(frames, -1),
+            matrix_to_rot6d(rotations).reshape(frames, -1),
+        ),
         dim=-1,
     )
 
@@ -47,7 +55,9 @@ def build_motion(
     local_rotations: torch.Tensor, root_position: torch.Tensor, generator: torch.Generator
 ) -> SkeletonMotion:
     positions = forward_kinematics(local_rotations, root_position, REST_OFFSETS.double()).positions
-    return SkeletonMotion(local_rotations, root_position, positions, raw_rows(local_rotations, positions, generator))
+    return SkeletonMotion(
+        local_rotations, root_position, positions, raw_rows(local_rotations, positions, generator)
+    )
 
 
 def random_motion(
@@ -57,6 +67,7 @@ def random_motion(
     root_xz: tuple[float, float] | None = None,
 ) -> SkeletonMotion:
     """A smooth random motion: drifting root, yawed body, every joint rotating slowly."""
+
     def uniform(*shape: int, scale: float = 1.0) -> torch.Tensor:
         return scale * (2 * torch.rand(*shape, generator=generator, dtype=torch.float64) - 1)
 
@@ -69,5 +80,7 @@ def random_motion(
     local[:, 0] = yaw_rotation @ local[:, 0]
     start = uniform(2, scale=2.0) if root_xz is None else torch.tensor(root_xz, dtype=torch.float64)
     drift = time[:, 0] * uniform(1, 3, scale=0.02)
-    root = torch.stack((start[0] + drift[:, 0], 0.9 + 0.05 * drift[:, 1], start[1] + drift[:, 2]), dim=-1)
+    root = torch.stack(
+        (start[0] + drift[:, 0], 0.9 + 0.05 * drift[:, 1], start[1] + drift[:, 2]), dim=-1
+    )
     return build_motion(local, root, generator)

@@ -43,7 +43,9 @@ def test_feature_layout_constants() -> None:
 
 def test_axis_change_matches_the_reference_matrix_and_round_trips() -> None:
     vectors = torch.randn(5, 7, 3, dtype=torch.float64)
-    reference = torch.tensor([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]], dtype=torch.float64)  # InterGen trans_matrix
+    reference = torch.tensor(
+        [[1.0, 0, 0], [0, 0, 1], [0, -1, 0]], dtype=torch.float64
+    )  # InterGen trans_matrix
     torch.testing.assert_close(zup_to_yup(vectors), vectors @ reference.T)
     torch.testing.assert_close(yup_to_zup(vectors), vectors @ YUP_TO_ZUP.T)
     torch.testing.assert_close(yup_to_zup(zup_to_yup(vectors)), vectors)
@@ -64,7 +66,9 @@ def test_canonical_frame_properties(make_motion) -> None:
     positions = canonical.positions
     torch.testing.assert_close(positions[0, 0, [0, 2]], torch.zeros(2, dtype=torch.float64))
     assert positions[..., 1].min().item() == pytest.approx(0.0, abs=1e-12)
-    torch.testing.assert_close(forward_of(positions[0]), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64))
+    torch.testing.assert_close(
+        forward_of(positions[0]), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+    )
     # A rigid motion: canonical = facing (world - origin) with facing a proper rotation about y.
     facing = canonical.facing
     torch.testing.assert_close(facing @ facing.T, torch.eye(3, dtype=torch.float64))
@@ -78,7 +82,9 @@ def test_canonical_frame_properties(make_motion) -> None:
 def test_facing_rotation_turns_any_heading_to_plus_z(make_motion, yaw: float) -> None:
     joints = make_motion(frames=2, yaw=yaw).positions[0]
     facing = facing_rotation(joints)
-    torch.testing.assert_close(facing @ forward_of(joints), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64))
+    torch.testing.assert_close(
+        facing @ forward_of(joints), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+    )
 
 
 def test_rest_pose_faces_plus_z_already() -> None:
@@ -99,7 +105,9 @@ def test_features_are_invariant_to_where_and_how_the_person_stands(make_motion) 
     moved = motion.positions @ turn.T + torch.tensor([3.0, 0.7, -2.0], dtype=torch.float64)
     raw_moved = motion.raw.clone()
     raw_moved[:, :66] = (moved @ YUP_TO_ZUP.T).reshape(20, 66)
-    torch.testing.assert_close(person_features(raw_moved).features, person_features(motion.raw).features)
+    torch.testing.assert_close(
+        person_features(raw_moved).features, person_features(motion.raw).features
+    )
 
 
 def test_features_positions_velocities_rotations(make_motion) -> None:
@@ -119,7 +127,9 @@ def test_features_positions_velocities_rotations(make_motion) -> None:
 def _swinging_right_leg(make_built_motion, frames: int = 12):
     """Pelvis still, left leg planted, right hip swinging forward by 0.06 rad per frame."""
     local = torch.eye(3, dtype=torch.float64).repeat(frames, 22, 1, 1)
-    swing = -0.06 * torch.arange(frames, dtype=torch.float64)  # negative about x lifts the leg forward
+    swing = -0.06 * torch.arange(
+        frames, dtype=torch.float64
+    )  # negative about x lifts the leg forward
     local[:, 2] = rotation_about_axis(swing, "x")
     pelvis_height = -rest_pose_positions(REST_OFFSETS.double())[:, 1].min()
     root = torch.tensor([0.5, 0.0, 0.2], dtype=torch.float64).repeat(frames, 1)
@@ -133,8 +143,12 @@ def test_foot_contacts_planted_and_moving_feet(make_built_motion) -> None:
     contacts = foot_contacts(positions)
     assert contacts.shape == (11, 4)
     assert contacts.dtype == torch.float64
-    torch.testing.assert_close(contacts[:, :2], torch.ones(11, 2, dtype=torch.float64))  # left planted
-    torch.testing.assert_close(contacts[:, 2:], torch.zeros(11, 2, dtype=torch.float64))  # right swings
+    torch.testing.assert_close(
+        contacts[:, :2], torch.ones(11, 2, dtype=torch.float64)
+    )  # left planted
+    torch.testing.assert_close(
+        contacts[:, 2:], torch.zeros(11, 2, dtype=torch.float64)
+    )  # right swings
     features = person_features(motion.raw).features
     torch.testing.assert_close(features[:, CONTACTS], contacts)
 
@@ -165,7 +179,9 @@ def test_float32_works_and_keeps_dtype(make_motion) -> None:
     raw = make_motion(frames=8).raw
     features32 = person_features(raw.float()).features
     assert features32.dtype == torch.float32
-    torch.testing.assert_close(features32.double(), person_features(raw).features, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(
+        features32.double(), person_features(raw).features, atol=1e-5, rtol=1e-5
+    )
 
 
 def test_features_are_differentiable(make_motion) -> None:

@@ -25,7 +25,9 @@ from intermask.motion.skeleton import REST_OFFSETS, rest_pose_positions
 def random_rows(frames: int, seed: int = 0) -> torch.Tensor:
     """(T, 56, 3) axis-angle rows with angles in (0, pi) and a translation row."""
     generator = torch.Generator().manual_seed(seed)
-    axes = torch.nn.functional.normalize(torch.randn(frames, 55, 3, generator=generator, dtype=torch.float64), dim=-1)
+    axes = torch.nn.functional.normalize(
+        torch.randn(frames, 55, 3, generator=generator, dtype=torch.float64), dim=-1
+    )
     angles = 0.1 + 2.9 * torch.rand(frames, 55, 1, generator=generator, dtype=torch.float64)
     translation = torch.randn(frames, 1, 3, generator=generator, dtype=torch.float64)
     return torch.cat((axes * angles, translation), dim=1)
@@ -74,12 +76,16 @@ def test_batched_representation() -> None:
 
 def test_standing_person_is_the_rest_pose_at_the_translation() -> None:
     rows = standing_rows(3)
-    rows[:, 55] = torch.tensor([[0.5, -1.0, 0.9], [0.6, -1.0, 0.9], [0.7, -1.0, 0.9]], dtype=torch.float64)
+    rows[:, 55] = torch.tensor(
+        [[0.5, -1.0, 0.9], [0.6, -1.0, 0.9], [0.7, -1.0, 0.9]], dtype=torch.float64
+    )
     positions = interx_positions(person_representation(rows))
     translation_yup = torch.tensor([0.5, 0.9, 1.0], dtype=torch.float64)  # (x, z, -y)
     expected = rest_pose_positions(REST_OFFSETS.double()) + translation_yup
     torch.testing.assert_close(positions[0], expected)
-    torch.testing.assert_close(positions[2, :, 0] - positions[0, :, 0], torch.full((22,), 0.2, dtype=torch.float64))
+    torch.testing.assert_close(
+        positions[2, :, 0] - positions[0, :, 0], torch.full((22,), 0.2, dtype=torch.float64)
+    )
 
 
 def test_known_elbow_bend() -> None:
@@ -88,7 +94,9 @@ def test_known_elbow_bend() -> None:
     rows[0, 18, 2] = math.pi / 2  # row 18 = joint 18 (l_elbow)
     positions = interx_positions(person_representation(rows), up_axis="y")[0]
     offset = REST_OFFSETS.double()[20]
-    torch.testing.assert_close(positions[20] - positions[18], torch.stack((-offset[1], offset[0], offset[2])))
+    torch.testing.assert_close(
+        positions[20] - positions[18], torch.stack((-offset[1], offset[0], offset[2]))
+    )
     rest = rest_pose_positions(REST_OFFSETS.double())
     torch.testing.assert_close(positions[:20], rest[:20])
 
@@ -97,7 +105,9 @@ def test_positions_match_fk_in_the_raw_frame() -> None:
     rows = random_rows(4, seed=4)
     offsets = REST_OFFSETS.double() * 1.1
     positions = interx_positions(person_representation(rows), offsets=offsets)
-    raw_positions = forward_kinematics(axis_angle_to_matrix(rows[:, :22]), rows[:, 55], offsets).positions
+    raw_positions = forward_kinematics(
+        axis_angle_to_matrix(rows[:, :22]), rows[:, 55], offsets
+    ).positions
     torch.testing.assert_close(positions @ YUP_TO_ZUP.T, raw_positions)
 
 

@@ -33,8 +33,8 @@ def test_joint_view_layout() -> None:
     torch.testing.assert_close(view[..., 0, 6:], torch.zeros(2, 5, 6))
     # joint 5 (r_knee): position, velocity, rotation of joint 5 = 6D block 4
     torch.testing.assert_close(view[1, 3, 5, :3], features[1, 3, 15:18])
-    torch.testing.assert_close(view[1, 3, 5, 3:6], features[1, 3, 66 + 15:66 + 18])
-    torch.testing.assert_close(view[1, 3, 5, 6:], features[1, 3, 132 + 24:132 + 30])
+    torch.testing.assert_close(view[1, 3, 5, 3:6], features[1, 3, 66 + 15 : 66 + 18])
+    torch.testing.assert_close(view[1, 3, 5, 6:], features[1, 3, 132 + 24 : 132 + 30])
 
 
 def test_joint_view_round_trip() -> None:
@@ -44,7 +44,9 @@ def test_joint_view_round_trip() -> None:
     expected[..., CONTACTS] = 0.0
     torch.testing.assert_close(back, expected, rtol=0, atol=0)
     view = features_to_joint_view(features)
-    torch.testing.assert_close(features_to_joint_view(joint_view_to_features(view)), view, rtol=0, atol=0)
+    torch.testing.assert_close(
+        features_to_joint_view(joint_view_to_features(view)), view, rtol=0, atol=0
+    )
 
 
 def test_joint_view_drops_a_nonzero_root_rotation() -> None:

@@ -21,7 +21,12 @@ def test_rest_pose_faces_plus_z_with_left_at_plus_x():
 
 def test_mirror_permutation_swaps_pairs_and_is_an_involution():
     permutation = torch.tensor(skeleton.MIRROR_PERMUTATION)
-    assert permutation[1] == 2 and permutation[20] == 21 and permutation[0] == 0 and permutation[15] == 15
+    assert (
+        permutation[1] == 2
+        and permutation[20] == 21
+        and permutation[0] == 0
+        and permutation[15] == 15
+    )
     assert torch.equal(permutation[permutation], torch.arange(skeleton.NUM_JOINTS))
     rest = skeleton.rest_pose_positions()
     mirrored = rest[permutation] * torch.tensor([-1.0, 1.0, 1.0])
@@ -31,7 +36,9 @@ def test_mirror_permutation_swaps_pairs_and_is_an_involution():
 def test_identity_pose_reproduces_rest_pose():
     identity = torch.eye(3).expand(skeleton.NUM_JOINTS, 3, 3)
     result = forward_kinematics(identity, torch.tensor([1.0, 2.0, 3.0]), skeleton.REST_OFFSETS)
-    torch.testing.assert_close(result.positions, skeleton.rest_pose_positions() + torch.tensor([1.0, 2.0, 3.0]))
+    torch.testing.assert_close(
+        result.positions, skeleton.rest_pose_positions() + torch.tensor([1.0, 2.0, 3.0])
+    )
 
 
 def test_root_rotation_turns_the_whole_body():
@@ -65,5 +72,7 @@ def test_bone_lengths_are_invariant_under_any_pose():
 
 
 def test_wrong_shapes_are_rejected():
-    with pytest.raises(ValueError, match=r"local_rotations: expected \(\.\.\., 22, 3, 3\), got \(21, 3, 3\)"):
+    with pytest.raises(
+        ValueError, match=r"local_rotations: expected \(\.\.\., 22, 3, 3\), got \(21, 3, 3\)"
+    ):
         forward_kinematics(torch.eye(3).repeat(21, 1, 1), torch.zeros(3), skeleton.REST_OFFSETS)

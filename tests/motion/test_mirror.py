@@ -44,7 +44,9 @@ def geometric_mirror(motion: SkeletonMotion, generator: torch.Generator) -> Skel
 def test_mirror_rot6d_is_the_6d_of_m_r_m(layout: str) -> None:
     rotations = axis_angle_to_matrix(torch.randn(50, 3, dtype=torch.float64))
     expected = matrix_to_rot6d(M @ rotations @ M, layout=layout)
-    torch.testing.assert_close(mirror_rot6d(matrix_to_rot6d(rotations, layout=layout), layout=layout), expected)
+    torch.testing.assert_close(
+        mirror_rot6d(matrix_to_rot6d(rotations, layout=layout), layout=layout), expected
+    )
     torch.testing.assert_close(mirror_matrix(rotations), M @ rotations @ M)
 
 
@@ -56,7 +58,9 @@ def test_rows_layout_negates_components_1_2_4() -> None:
 
 def test_lateral_axis_is_x_in_both_raw_and_yup_frames() -> None:
     vectors = torch.randn(10, 3)
-    torch.testing.assert_close(zup_to_yup(reflect_lateral(vectors)), reflect_lateral(zup_to_yup(vectors)))
+    torch.testing.assert_close(
+        zup_to_yup(reflect_lateral(vectors)), reflect_lateral(zup_to_yup(vectors))
+    )
 
 
 def test_fk_of_mirrored_rotations_is_the_mirrored_skeleton() -> None:
@@ -82,14 +86,18 @@ def test_mirrored_features_equal_features_of_the_mirrored_skeleton() -> None:
 def test_mirror_commutes_with_the_feature_computation() -> None:
     motion = random_motion(torch.Generator().manual_seed(2), frames=10)
     features = person_features(motion.raw).features
-    torch.testing.assert_close(person_features(motion.raw, mirror=True).features, mirror_features(features))
+    torch.testing.assert_close(
+        person_features(motion.raw, mirror=True).features, mirror_features(features)
+    )
 
 
 def test_mirror_commutes_with_the_two_person_relation() -> None:
     generator = torch.Generator().manual_seed(3)
     one, two = random_motion(generator, frames=9), random_motion(generator, frames=9)
     features = interaction_features(one.raw, two.raw)
-    torch.testing.assert_close(interaction_features(one.raw, two.raw, mirror=True), mirror_features(features))
+    torch.testing.assert_close(
+        interaction_features(one.raw, two.raw, mirror=True), mirror_features(features)
+    )
 
 
 def test_mirroring_twice_is_the_identity() -> None:
@@ -104,7 +112,9 @@ def test_mirroring_twice_is_the_identity() -> None:
 def test_contacts_change_sides() -> None:
     frames = 10
     local = torch.eye(3, dtype=torch.float64).repeat(frames, 22, 1, 1)
-    local[:, 2] = rotation_about_axis(-0.06 * torch.arange(frames, dtype=torch.float64), "x")  # right leg swings
+    local[:, 2] = rotation_about_axis(
+        -0.06 * torch.arange(frames, dtype=torch.float64), "x"
+    )  # right leg swings
     root = torch.tensor([0.0, 0.95, 0.0], dtype=torch.float64).repeat(frames, 1)
     motion = build_motion(local, root, torch.Generator().manual_seed(5))
     contacts = person_features(motion.raw).features[:, CONTACTS]
@@ -114,8 +124,12 @@ def test_contacts_change_sides() -> None:
 
 
 def test_permutations_swap_sides_and_are_involutions() -> None:
-    for permutation in (MIRROR_PERMUTATION, ROTATION_MIRROR_PERMUTATION, RAW_MIRROR_PERMUTATION,
-                        RAW_ROTATION_MIRROR_PERMUTATION):
+    for permutation in (
+        MIRROR_PERMUTATION,
+        ROTATION_MIRROR_PERMUTATION,
+        RAW_MIRROR_PERMUTATION,
+        RAW_ROTATION_MIRROR_PERMUTATION,
+    ):
         assert sorted(permutation) == list(range(len(permutation)))
         assert all(permutation[permutation[j]] == j for j in range(len(permutation)))
     assert ROTATION_MIRROR_PERMUTATION[0] == 1  # rotation of joint 1 (l_hip) <-> joint 2 (r_hip)

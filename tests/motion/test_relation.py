@@ -19,12 +19,14 @@ from intermask.motion.interhuman import (
 def _qmul(q: np.ndarray, r: np.ndarray) -> np.ndarray:
     w1, x1, y1, z1 = q
     w2, x2, y2, z2 = r
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 def _qinv(q: np.ndarray) -> np.ndarray:
@@ -66,7 +68,9 @@ def _reference_person2(raw1: np.ndarray, raw2: np.ndarray) -> tuple[np.ndarray, 
     rotation = _qinv(np.array([np.cos(angle), 0.0, np.sin(angle), 0.0]))
     moved = np.stack([[_qrot(rotation, p) for p in frame] for frame in positions2])
     moved[..., [0, 2]] += xz
-    velocities = np.stack([[_qrot(rotation, v) for v in frame] for frame in positions2[1:] - positions2[:-1]])
+    velocities = np.stack(
+        [[_qrot(rotation, v) for v in frame] for frame in positions2[1:] - positions2[:-1]]
+    )
     return moved[:-1], velocities
 
 
@@ -104,12 +108,14 @@ def test_relation_preserves_the_world_geometry_between_persons() -> None:
     one, two = _pair(4, frames=10)
     parts1, parts2 = (split_features(f) for f in interaction_features(one.raw, two.raw).unbind(1))
     world1, world2 = one.positions[:-1], two.positions[:-1]
+
     # Horizontal distances between any joint of person 1 and any joint of person 2 are unchanged.
     def horizontal_distances(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
         return torch.cdist(a[..., [0, 2]], b[..., [0, 2]])
 
     torch.testing.assert_close(
-        horizontal_distances(parts1.positions, parts2.positions), horizontal_distances(world1, world2)
+        horizontal_distances(parts1.positions, parts2.positions),
+        horizontal_distances(world1, world2),
     )
     # Heights: each person stands on their own floor.
     floor2 = two.positions[..., 1].min()

@@ -17,7 +17,9 @@ def test_vq_schedule_warms_up_over_a_quarter_then_steps_down_twice():
 
 def test_generator_schedule_divides_by_three_at_each_milestone():
     factors = [
-        warmup_multistep_factor(s, total_steps=100, warmup_fraction=0.0, milestones=(0.5, 0.7, 0.85), gamma=1 / 3)
+        warmup_multistep_factor(
+            s, total_steps=100, warmup_fraction=0.0, milestones=(0.5, 0.7, 0.85), gamma=1 / 3
+        )
         for s in (0, 49, 50, 70, 85, 99)
     ]
     assert factors == pytest.approx([1, 1, 1 / 3, 1 / 9, 1 / 27, 1 / 27])

@@ -3,15 +3,28 @@ import torch
 
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 
-INTERHUMAN = dict(num_joints=22, channels=12, joint_kernel=4, joint_stride=2, joint_scales=(2.2, 2.0))
+INTERHUMAN = dict(
+    num_joints=22, channels=12, joint_kernel=4, joint_stride=2, joint_scales=(2.2, 2.0)
+)
 INTERX = dict(num_joints=56, channels=6, joint_kernel=6, joint_stride=3, joint_scales=(3.5, 3.3))
 
 
 def _build(spec, width=32, layout="2d"):
-    encoder = MotionEncoder(num_joints=spec["num_joints"], in_channels=spec["channels"], width=width,
-                            joint_kernel=spec["joint_kernel"], joint_stride=spec["joint_stride"], layout=layout)
-    decoder = MotionDecoder(num_joints=spec["num_joints"], out_channels=spec["channels"], width=width,
-                            joint_scales=spec["joint_scales"], layout=layout)
+    encoder = MotionEncoder(
+        num_joints=spec["num_joints"],
+        in_channels=spec["channels"],
+        width=width,
+        joint_kernel=spec["joint_kernel"],
+        joint_stride=spec["joint_stride"],
+        layout=layout,
+    )
+    decoder = MotionDecoder(
+        num_joints=spec["num_joints"],
+        out_channels=spec["channels"],
+        width=width,
+        joint_scales=spec["joint_scales"],
+        layout=layout,
+    )
     return encoder, decoder
 
 
@@ -50,5 +63,7 @@ def test_encoder_is_local_in_time():
 
 
 def test_inconsistent_joint_scales_are_rejected():
-    with pytest.raises(ValueError, match=r"joint_scales \(2.0, 2.0\) take 5 latent rows to 20 joints, expected 22"):
+    with pytest.raises(
+        ValueError, match=r"joint_scales \(2.0, 2.0\) take 5 latent rows to 20 joints, expected 22"
+    ):
         MotionDecoder(num_joints=22, out_channels=12, width=8, joint_scales=(2.0, 2.0))

@@ -64,11 +64,21 @@ def _geometry_pair():
 def test_losses_vanish_on_a_perfect_reconstruction():
     view, target = _geometry_pair()
     terms = vq_losses(
-        prediction=target, target=target, predicted_geometry=view.geometry(target), target_geometry=view.geometry(target),
-        reconstruction_mask=view.reconstruction_mask(target.device), frame_mask=torch.ones(2, 8, dtype=torch.bool),
-        commit_loss=torch.tensor(0.5), weights=LossWeights(),
+        prediction=target,
+        target=target,
+        predicted_geometry=view.geometry(target),
+        target_geometry=view.geometry(target),
+        reconstruction_mask=view.reconstruction_mask(target.device),
+        frame_mask=torch.ones(2, 8, dtype=torch.bool),
+        commit_loss=torch.tensor(0.5),
+        weights=LossWeights(),
     )
-    assert terms.reconstruction == 0 and terms.positions == 0 and terms.velocity == 0 and terms.bone_length == 0
+    assert (
+        terms.reconstruction == 0
+        and terms.positions == 0
+        and terms.velocity == 0
+        and terms.bone_length == 0
+    )
     assert terms.geodesic.abs() < 1e-3
     assert terms.total == pytest.approx(0.02 * 0.5 + 0.01 * terms.geodesic.item())
 
@@ -83,11 +93,19 @@ def test_geometric_terms_measure_what_they_claim():
     base = rot6d_to_matrix(ih.split_features(target).rot6d)
     prediction[..., ih.ROTATIONS] = matrix_to_rot6d(turn @ base).flatten(-2)
     terms = vq_losses(
-        prediction=prediction, target=target, predicted_geometry=view.geometry(prediction),
-        target_geometry=view.geometry(target), reconstruction_mask=view.reconstruction_mask(target.device),
-        frame_mask=torch.ones(2, 8, dtype=torch.bool), commit_loss=torch.tensor(0.0), weights=LossWeights(), kind="l1",
+        prediction=prediction,
+        target=target,
+        predicted_geometry=view.geometry(prediction),
+        target_geometry=view.geometry(target),
+        reconstruction_mask=view.reconstruction_mask(target.device),
+        frame_mask=torch.ones(2, 8, dtype=torch.bool),
+        commit_loss=torch.tensor(0.0),
+        weights=LossWeights(),
+        kind="l1",
     )
-    assert terms.positions.item() == pytest.approx(0.01 / 3, rel=1e-4)  # one of three axes off by 1 cm
+    assert terms.positions.item() == pytest.approx(
+        0.01 / 3, rel=1e-4
+    )  # one of three axes off by 1 cm
     assert terms.velocity.item() == pytest.approx(0.0, abs=1e-6)
     assert terms.bone_length.item() == pytest.approx(0.0, abs=1e-6)
     assert terms.geodesic.item() == pytest.approx(0.1, abs=1e-4)
@@ -105,9 +123,15 @@ def test_foot_contact_penalises_sliding_planted_feet_only():
     prediction[..., ih.POSITIONS] = positions.flatten(-2)
     mask = torch.ones(2, 8, dtype=torch.bool)
     terms = vq_losses(
-        prediction=prediction, target=target, predicted_geometry=view.geometry(prediction),
-        target_geometry=view.geometry(target), reconstruction_mask=view.reconstruction_mask(target.device),
-        frame_mask=mask, commit_loss=torch.tensor(0.0), weights=LossWeights(), kind="l1",
+        prediction=prediction,
+        target=target,
+        predicted_geometry=view.geometry(prediction),
+        target_geometry=view.geometry(target),
+        reconstruction_mask=view.reconstruction_mask(target.device),
+        frame_mask=mask,
+        commit_loss=torch.tensor(0.0),
+        weights=LossWeights(),
+        kind="l1",
     )
     # one planted joint of 4, one axis of 3, 1 cm per step
     assert terms.foot_contact.item() == pytest.approx(0.01 / 12, rel=1e-4)
@@ -120,9 +144,14 @@ def test_padding_frames_do_not_count():
     mask = torch.zeros(2, 8, dtype=torch.bool)
     mask[:, :4] = True
     terms = vq_losses(
-        prediction=prediction, target=target, predicted_geometry=view.geometry(prediction),
-        target_geometry=view.geometry(target), reconstruction_mask=view.reconstruction_mask(target.device),
-        frame_mask=mask, commit_loss=torch.tensor(0.0), weights=LossWeights(),
+        prediction=prediction,
+        target=target,
+        predicted_geometry=view.geometry(prediction),
+        target_geometry=view.geometry(target),
+        reconstruction_mask=view.reconstruction_mask(target.device),
+        frame_mask=mask,
+        commit_loss=torch.tensor(0.0),
+        weights=LossWeights(),
     )
     assert terms.reconstruction == 0 and terms.positions == 0 and terms.velocity == 0
 
@@ -131,7 +160,11 @@ def test_interx_view_without_body_model_has_no_positions():
     view = InterXView()
     features = torch.randn(2, 8, 56, 6)
     geometry = view.geometry(features)
-    assert geometry.positions is None and geometry.contacts is None and geometry.rot6d.shape == (2, 8, 55, 6)
+    assert (
+        geometry.positions is None
+        and geometry.contacts is None
+        and geometry.rot6d.shape == (2, 8, 55, 6)
+    )
     with_body = InterXView(body_offsets=REST_OFFSETS).geometry(features)
     assert with_body.positions.shape == (2, 8, 22, 3) and with_body.contacts.shape == (2, 8, 4)
     assert not math.isnan(with_body.positions.sum().item())

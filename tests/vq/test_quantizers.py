@@ -28,7 +28,9 @@ def test_ema_update_moves_codes_toward_the_mean_of_their_vectors():
     # code 0: count 0.5*1 + 0.5*2 = 1.5, sum 0.5*0 + 0.5*(4, 4) = (2, 2)
     # code 1: count 0.5*1 + 0.5*1 = 1.0, sum 0.5*(10, 10) + 0.5*(9, 9) = (9.5, 9.5)
     torch.testing.assert_close(quantizer.ema_count, torch.tensor([1.5, 1.0]))
-    torch.testing.assert_close(quantizer.codebook, torch.tensor([[2 / 1.5, 2 / 1.5], [9.5, 9.5]]), atol=1e-4, rtol=0)
+    torch.testing.assert_close(
+        quantizer.codebook, torch.tensor([[2 / 1.5, 2 / 1.5], [9.5, 9.5]]), atol=1e-4, rtol=0
+    )
 
 
 def test_dead_codes_are_reset_to_current_encoder_outputs():
@@ -43,7 +45,9 @@ def test_dead_codes_are_reset_to_current_encoder_outputs():
     # codes 1 and 2 got nothing: count 0.9 < 1 -> replaced by batch vectors, count back to 1
     vectors = x.permute(0, 2, 3, 1).reshape(-1, 2)
     for code in (1, 2):
-        assert torch.isclose(torch.cdist(quantizer.codebook[code : code + 1], vectors), torch.tensor(0.0)).any()
+        assert torch.isclose(
+            torch.cdist(quantizer.codebook[code : code + 1], vectors), torch.tensor(0.0)
+        ).any()
     torch.testing.assert_close(quantizer.ema_count[1:], torch.ones(2))
 
 
@@ -80,7 +84,9 @@ def test_six_residual_layers_reconstruct_better_than_one():
 
 def test_quantization_dropout_keeps_a_prefix_of_layers():
     torch.manual_seed(3)
-    quantizer = ResidualQuantizer(num_quantizers=4, codebook_size=8, dim=4, dropout_prob=1.0).train()
+    quantizer = ResidualQuantizer(
+        num_quantizers=4, codebook_size=8, dim=4, dropout_prob=1.0
+    ).train()
     kept_counts = set()
     for _ in range(20):
         indices = quantizer(torch.randn(2, 4, 1, 4)).indices
@@ -95,7 +101,10 @@ def test_quantization_dropout_keeps_a_prefix_of_layers():
     ("kwargs", "message"),
     [
         (dict(decay=1.0), r"decay must be in \(0, 1\), got 1.0"),
-        (dict(stochastic_temperature=0.0), "stochastic_temperature must be positive or None, got 0.0"),
+        (
+            dict(stochastic_temperature=0.0),
+            "stochastic_temperature must be positive or None, got 0.0",
+        ),
     ],
 )
 def test_invalid_options_are_rejected(kwargs, message):

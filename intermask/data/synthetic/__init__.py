@@ -4,7 +4,8 @@
 dataset in one of the official layouts, so the real readers are what every test and demo uses.
 Each clip is one of 14 interactions (``ACTIONS``) between an actor and a reactor who answers after
 a short delay, posed by forward kinematics of the SMPL 22-joint skeleton with per-person
-proportions, feet on the ground, three paraphrased captions, and an action / actor annotation in
+proportions, feet on the ground, per-person posture and secondary motion (:mod:`.secondary`) in
+every joint, three paraphrased captions, and an action / actor annotation in
 ``interaction_meta.json``. The same seed gives the same bytes.
 """
 
@@ -78,9 +79,13 @@ class SynthSummary:
         )
 
 
+_DATASET_STREAM_TAG = 0x5EED  # any non-zero word
+
+
 def _dataset_rng(seed: int, stream: int) -> np.random.Generator:
-    # Clip streams are SeedSequence([seed, index]); a 3-word key can never collide with them.
-    return np.random.default_rng(np.random.SeedSequence([seed, stream, 0]))
+    # Clip streams are SeedSequence([seed, index]). SeedSequence drops trailing zero words, so a
+    # third word must be non-zero to keep dataset-level streams apart from the clip streams.
+    return np.random.default_rng(np.random.SeedSequence([seed, stream, _DATASET_STREAM_TAG]))
 
 
 def assign_actions(clips: int, seed: int) -> list[str]:
@@ -143,7 +148,8 @@ def _readme(*, format: str, clips: int, seed: int, split_sizes: dict[str, int]) 
         "NOT motion capture. Every clip was generated procedurally by intermask.data.synthetic:\n"
         f"{len(ACTIONS)} scripted interactions ({', '.join(ACTIONS)}) between an actor and a reactor who\n"
         "responds after a short delay, posed by forward kinematics of the SMPL 22-joint skeleton\n"
-        "(per-person proportions, closed-form leg and arm IK, planted feet), 30 fps, 2-10 s,\n"
+        "(per-person proportions, closed-form leg and arm IK, planted feet, random posture and\n"
+        "secondary sway, gaze towards the partner), 30 fps, 2-10 s,\n"
         "three template captions per clip. interaction_meta.json names the action and the actor.\n\n"
         f"layout: {format}\nclips: {clips} (train {split_sizes['train']}, val {split_sizes['val']}, "
         f"test {split_sizes['test']})\nseed: {seed}\n"

@@ -103,7 +103,9 @@ def generate_clip(*, seed: int, index: int, action: str, vary_bodies: bool = Tru
     )
     setup = sample_setup(rng, bodies)
     scene = INTERACTIONS[action](setup)
-    actor_motion, reactor_motion = realize(scene)
+    # A child stream for the secondary motion leaves the choreography's draws (and so every
+    # scripted timing) exactly as they were without it.
+    actor_motion, reactor_motion = realize(scene, rng.spawn(1)[0])
     actor = 1 + int(rng.integers(2))
     heading = float(rng.uniform(-math.pi, math.pi))
     rotation = rotation_about_axis(torch.tensor(heading, dtype=torch.float64), "y")

@@ -82,7 +82,7 @@ def solve_arm(
     front of the body; the upper-arm twist follows from where the elbow points.
     """
     a = torch.linalg.vector_norm(upper_bone)
-    b = torch.linalg.vector_norm(lower_bone)
+    b = torch.linalg.vector_norm(lower_bone, dim=-1, keepdim=True)
     reach = target - shoulder
     distance = torch.linalg.vector_norm(reach, dim=-1, keepdim=True)
     direction = reach / distance.clamp_min(_EPS)
@@ -102,7 +102,8 @@ def solve_arm(
         rest_upper, F.normalize(torch.linalg.cross(rest_upper, forward, dim=-1), dim=-1)
     )
     lower_rest = _frame(
-        rest_lower, F.normalize(torch.linalg.cross(rest_lower, forward, dim=-1), dim=-1)
+        rest_lower,
+        F.normalize(torch.linalg.cross(rest_lower, forward.expand_as(rest_lower), dim=-1), dim=-1),
     )
     upper = _frame(upper_dir, hinge) @ upper_rest.transpose(-1, -2)
     lower = _frame(lower_dir, hinge) @ lower_rest.transpose(-1, -2)
