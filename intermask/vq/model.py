@@ -57,11 +57,19 @@ class MotionVQVAE(nn.Module):
         )
 
     @torch.no_grad()
-    def encode(self, features: torch.Tensor) -> torch.Tensor:
-        """(B, T, *F) normalized features -> (B, Q, rows, T/4) code indices (nearest codes)."""
+    def encode(self, features: torch.Tensor, lengths: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, T, *F) normalized features -> (B, Q, rows, T/4) nearest-code indices.
+
+        With ``lengths`` (B,) in frames, token steps at or beyond ``lengths // 4`` (padding; the
+        generator works on lengths rounded down to a multiple of 4) are set to -1.
+        """
         self._check_frames(features.shape[1])
-        latent = self.encoder(self.view.to_joints(features))
-        return self.quantizer.encode(latent)
+        indices = self.quantizer.encode(self.encoder(self.view.to_joints(features)))
+        if lengths is not None:
+            steps = torch.arange(indices.shape[-1], device=indices.device)
+            padding = steps[None, :] >= (lengths.to(indices.device) // 4)[:, None]  # (B, T/4)
+            indices = indices.masked_fill(padding[:, None, None, :], -1)
+        return indices
 
     def decode(self, indices: torch.Tensor) -> torch.Tensor:
         """(B, Q', rows, T') indices (Q' <= Q layers, -1 = unused) -> (B, 4 T', *F) normalized features."""

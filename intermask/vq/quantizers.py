@@ -21,7 +21,7 @@ class QuantizerOutput(NamedTuple):
     indices: torch.Tensor  # (B, H, W) int64
     commit_loss: torch.Tensor  # () MSE(x, sg(q)), unweighted
     perplexity: torch.Tensor  # () exp(entropy) of this batch's code histogram
-    dead_codes: torch.Tensor  # () codes whose EMA count is below the reset threshold (before reset)
+    dead_codes: torch.Tensor  # () codes re-initialised by this training step (0 in eval mode)
 
 
 class ResidualQuantizerOutput(NamedTuple):
@@ -95,9 +95,9 @@ class EMAQuantizer(nn.Module):
         if self.training and not bool(self.initialized):
             self._initialise(flat.detach())
         indices = self._assign(flat.detach())
-        dead = (self.ema_count < self.reset_threshold).sum()
+        dead = torch.zeros((), dtype=torch.long, device=x.device)
         if self.training:
-            self._ema_update(flat.detach().float(), indices)
+            dead = self._ema_update(flat.detach().float(), indices)
         quantized_flat = F.embedding(indices, self.codebook).to(flat.dtype)
         commit_loss = F.mse_loss(flat, quantized_flat.detach())
         quantized_flat = flat + (quantized_flat - flat).detach()
@@ -158,7 +158,8 @@ class EMAQuantizer(nn.Module):
         self.initialized.fill_(True)
 
     @torch.no_grad()
-    def _ema_update(self, flat: torch.Tensor, indices: torch.Tensor) -> None:
+    def _ema_update(self, flat: torch.Tensor, indices: torch.Tensor) -> torch.Tensor:
+        """EMA step of counts, sums and codes; returns how many dead codes were reset."""
         counts = _all_reduce_sum(torch.bincount(indices, minlength=self.codebook_size).float())
         sums = _all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
         self.ema_count.mul_(self.decay).add_(counts, alpha=1 - self.decay)
@@ -174,6 +175,7 @@ class EMAQuantizer(nn.Module):
             self.codebook[dead] = replacement[dead]
             self.ema_sum[dead] = replacement[dead]
             self.ema_count[dead] = 1.0
+        return dead.sum()
 
 
 class ResidualQuantizer(nn.Module):

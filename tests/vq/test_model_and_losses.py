@@ -39,6 +39,13 @@ def test_encode_decode_shapes_and_consistency_with_forward():
     assert torch.all(decoded[..., ih.CONTACTS] == 0)
 
 
+def test_encode_marks_token_steps_beyond_the_length_as_padding():
+    model = _interhuman_vq().eval()
+    tokens = model.encode(torch.randn(2, 64, 262), lengths=torch.tensor([64, 30]))
+    assert (tokens[0] >= 0).all()
+    assert (tokens[1, ..., :7] >= 0).all() and (tokens[1, ..., 7:] == -1).all()  # 30 // 4 = 7 steps
+
+
 def test_encode_never_updates_the_codebook_even_in_train_mode():
     model = _interhuman_vq()
     features = torch.randn(2, 16, 262)

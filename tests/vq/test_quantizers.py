@@ -41,8 +41,8 @@ def test_dead_codes_are_reset_to_current_encoder_outputs():
     quantizer.initialized.fill_(True)
     x = torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1]]).T.reshape(1, 2, 1, 4)
     out = quantizer(x)
-    assert out.dead_codes == 0  # counts were 1.0 before this batch
     # codes 1 and 2 got nothing: count 0.9 < 1 -> replaced by batch vectors, count back to 1
+    assert out.dead_codes == 2
     vectors = x.permute(0, 2, 3, 1).reshape(-1, 2)
     for code in (1, 2):
         assert torch.isclose(
