@@ -63,3 +63,19 @@ def test_slurm_launcher_composes():
         cfg = compose("train_vq", overrides=["hydra/launcher=slurm"], return_hydra_config=True)
     assert cfg.hydra.launcher._target_.endswith("SlurmLauncher")
     assert cfg.hydra.launcher.gpus_per_node == 1
+
+
+@pytest.mark.parametrize(
+    ("experiment", "persons", "rows"), [("vq_ablation_two_person", 2, 5), ("vq_ablation_1d", 1, 1)]
+)
+def test_vq_ablations_are_config_selections(experiment, persons, rows):
+    import torch
+
+    cfg = _compose(
+        "train_vq",
+        [f"experiment={experiment}", "model.net.encoder.width=8", "model.net.quantizer.codebook_size=4"],
+    )
+    net = instantiate(cfg.model).net
+    features = torch.randn(1, 16, 2, 262) if persons == 2 else torch.randn(1, 16, 262)
+    assert net.train()(features).indices.shape == (1, 1, rows, 4)
+    assert cfg.data.get("window_persons", 1) == persons

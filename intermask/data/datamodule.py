@@ -68,6 +68,7 @@ class InteractionDataModule(LightningDataModule):
         min_length: int | None = None,
         window: int = 64,
         stride: int = 10,
+        window_persons: int = 1,
         mirror: bool = True,
         swap_persons: bool | None = None,
         normalize: bool | None = None,
@@ -95,7 +96,7 @@ class InteractionDataModule(LightningDataModule):
         self.drop_last = drop_last
         self.max_length = max_length or DEFAULT_MAX_LENGTH[dataset]
         self.min_length = min_length or DEFAULT_MIN_LENGTH[dataset]
-        self.window, self.stride = window, stride
+        self.window, self.stride, self.window_persons = window, stride, window_persons
         # Inter-X has no mirror augmentation in the reference (no left/right caption tokens to
         # swap in its POS-tagged texts); the flag is ignored there, loudly.
         self.mirror = mirror and dataset == "interhuman"
@@ -187,6 +188,7 @@ class InteractionDataModule(LightningDataModule):
             min_length=self.min_length,
             window=self.window,
             stride=self.stride,
+            window_persons=self.window_persons,
             swap_persons=self.swap_persons,
             normalizer=self.normalizer,
             seed=self.seed,

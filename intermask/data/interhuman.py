@@ -14,7 +14,9 @@ Item modes:
     "interaction": {"motion": (2, max_length, 262), "length", "caption", "id", "mirrored",
                     "persons", and "action", "action_id", "actor" when interaction_meta.json exists}
     "window":      {"motion": (window, 262), "id", "person", "mirrored", "start"}: single-person
-                   windows over whole canonical sequences (person 2 in person 1's frame).
+                   windows over whole canonical sequences (person 2 in person 1's frame); with
+                   ``window_persons=2`` two-person windows (window, 2, 262) and "person" 0
+                   (the interaction-level VQ ablation, InterMask Table 2).
 """
 
 from __future__ import annotations
@@ -163,6 +165,7 @@ class InterHumanDataset(Dataset):
         min_length: int = 15,
         window: int = 64,
         stride: int = 10,
+        window_persons: int = 1,
         mirror: bool = False,
         swap_persons: bool = True,
         normalizer: Normalizer | None = None,
@@ -182,7 +185,9 @@ class InterHumanDataset(Dataset):
         self.layout = InterHumanLayout(Path(root))
         self.split, self.mode = split, mode
         self.max_length, self.min_length = max_length, min_length
-        self.window, self.stride = window, stride
+        if window_persons not in (1, 2):
+            raise ValueError(f"window_persons must be 1 or 2, got {window_persons}")
+        self.window, self.stride, self.window_persons = window, stride, window_persons
         self.mirror, self.swap_persons = mirror, swap_persons
         self.normalizer, self.seed, self.epoch = normalizer, seed, epoch
         self._load()
@@ -230,12 +235,16 @@ class InterHumanDataset(Dataset):
         for clip in range(len(self.clip_ids)):
             for mirrored in (False, True) if self.mirror else (False,):
                 features = self.clip_features(clip, mirror=mirrored).numpy()  # (T-1, 2, 262)
+                if self.window_persons == 2:
+                    sequences.append(features)
+                    self._window_source.append((clip, 0, mirrored))
+                    continue
                 for person in (0, 1):
                     sequences.append(features[:, person])
                     self._window_source.append((clip, person + 1, mirrored))
         lengths = [len(s) for s in sequences]
         self._window_offsets = np.concatenate(([0], np.cumsum(lengths)))
-        self._window_data = np.concatenate(sequences, axis=0)  # (sum L, 262)
+        self._window_data = np.concatenate(sequences, axis=0)  # (sum L, 262) or (sum L, 2, 262)
         self.windows = build_window_index(lengths, window=self.window, stride=self.stride)
         short = sorted(
             {

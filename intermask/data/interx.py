@@ -150,7 +150,8 @@ class InterXDataset(Dataset):
 
     Interaction items: {"motion", "length", "caption", "tokens", "id", "persons"} plus "action",
     "action_id" (from the name or interaction_meta.json) and "actor" (interaction_order.pkl or the
-    meta file) when available. Window items: {"motion": (window, 56, 6), "id", "person", "start"}.
+    meta file) when available. Window items: {"motion": (window, 56, 6), "id", "person", "start"}; with
+    ``window_persons=2`` the motion is (window, 2, 56, 6) and "person" is 0.
     No mirroring (the reference has none for Inter-X).
     """
 
@@ -169,6 +170,7 @@ class InterXDataset(Dataset):
         length_jitter: bool = True,
         crop: Crop = "random",
         window: int = 64,
+        window_persons: int = 1,
         stride: int = 10,
         swap_persons: bool = False,
         normalizer: Normalizer | None = None,
@@ -191,7 +193,9 @@ class InterXDataset(Dataset):
         self.split, self.mode, self.crop = split, mode, crop
         self.max_length, self.min_length, self.max_frames = max_length, min_length, max_frames
         self.unit_length, self.length_jitter = unit_length, length_jitter
-        self.window, self.stride = window, stride
+        if window_persons not in (1, 2):
+            raise ValueError(f"window_persons must be 1 or 2, got {window_persons}")
+        self.window, self.stride, self.window_persons = window, stride, window_persons
         self.swap_persons, self.normalizer = swap_persons, normalizer
         self.seed, self.epoch = seed, epoch
         self._load()
@@ -260,9 +264,9 @@ class InterXDataset(Dataset):
             self.actors = [order[n] + 1 for n in self.clip_ids]
 
     def _build_windows(self) -> None:
-        lengths = [
-            int(n) for n in self.frames for _ in (0, 1)
-        ]  # sequence 2c + p = person p of clip c
+        # single-person windows: sequence P c + p is person p of clip c; two-person: P = 1
+        per_clip = 1 if self.window_persons == 2 else 2
+        lengths = [int(n) for n in self.frames for _ in range(per_clip)]
         self.windows = build_window_index(lengths, window=self.window, stride=self.stride)
         short = [
             SkippedClip(i, f"fewer than {self.window} frames")
@@ -305,8 +309,13 @@ class InterXDataset(Dataset):
 
     def _window_item(self, index: int) -> dict[str, Any]:
         seq, start = int(self.windows.sequence[index]), int(self.windows.start[index])
-        clip, person = divmod(seq, 2)
-        motion = self.clip_features(clip, start=start, frames=self.window)[person]
+        if self.window_persons == 2:
+            clip, person = seq, -1
+            pair = self.clip_features(clip, start=start, frames=self.window)  # (2, W, 56, 6)
+            motion = rearrange(pair, "p t j c -> t p j c")
+        else:
+            clip, person = divmod(seq, 2)
+            motion = self.clip_features(clip, start=start, frames=self.window)[person]
         return {
             "motion": self._normalize(motion),
             "id": self.clip_ids[clip],

@@ -87,7 +87,7 @@ class MotionEncoder(nn.Module):
         layout: TokenLayout = "2d",
     ) -> None:
         super().__init__()
-        self.layout = layout
+        self.layout, self.num_joints, self.in_channels = layout, num_joints, in_channels
         stem_in = in_channels if layout == "2d" else num_joints * in_channels
         downsample = [
             layer

@@ -9,6 +9,7 @@ from torch import nn
 
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.quantizers import ResidualQuantizer
+from intermask.vq.views import TwoPersonView
 
 
 class VQVAEOutput(NamedTuple):
@@ -23,7 +24,8 @@ class MotionVQVAE(nn.Module):
     """Tokenizes one person's motion into a (rows, T/4) grid of codes per quantizer layer.
 
     ``view`` adapts the dataset features (see :mod:`intermask.vq.views`); time must be a multiple
-    of 4 (the two stride-2 stages).
+    of 4 (the two stride-2 stages). ``persons=2`` is the interaction-level ablation: the input is
+    (B, T, 2, *F) and both persons share one token grid, so the encoder takes twice the channels.
     """
 
     def __init__(
@@ -33,8 +35,17 @@ class MotionVQVAE(nn.Module):
         encoder: MotionEncoder,
         quantizer: ResidualQuantizer,
         decoder: MotionDecoder,
+        persons: int = 1,
     ) -> None:
         super().__init__()
+        if persons not in (1, 2):
+            raise ValueError(f"persons must be 1 or 2, got {persons}")
+        view = TwoPersonView(person=view) if persons == 2 else view
+        if (encoder.num_joints, encoder.in_channels) != (view.num_joints, view.channels):
+            raise ValueError(
+                f"the encoder takes {encoder.num_joints} joints x {encoder.in_channels} channels, the "
+                f"{persons}-person view gives {view.num_joints} x {view.channels}"
+            )
         self.view, self.encoder, self.quantizer, self.decoder = view, encoder, quantizer, decoder
 
     @staticmethod

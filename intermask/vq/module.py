@@ -17,7 +17,7 @@ from intermask.metrics.mpjpe import MPJPE
 from intermask.utils.schedules import warmup_multistep_factor
 from intermask.vq.losses import LossKind, LossTerms, LossWeights, vq_losses
 from intermask.vq.model import MotionVQVAE
-from intermask.vq.views import InterHumanView
+from intermask.vq.views import InterHumanView, TwoPersonView, person_view
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class VQVAEModule(L.LightningModule):
 
     def setup(self, stage: str) -> None:
         """Copy the datamodule's normalization statistics into the view (then they live in checkpoints)."""
-        view = self.net.view
+        view = person_view(self.net.view)
         if isinstance(view, InterHumanView) and not bool(view.has_statistics):
             normalizer = (
                 getattr(self.trainer.datamodule, "normalizer", None) if self.trainer else None
@@ -89,16 +89,19 @@ class VQVAEModule(L.LightningModule):
         if frame_mask is None:
             frame_mask = torch.ones(motion.shape[:2], dtype=torch.bool, device=motion.device)
         out = self.net(motion)
-        view = self.net.view
-        predicted, real = view.geometry(out.reconstruction), view.geometry(motion)
+        prediction, target, view = out.reconstruction, motion, self.net.view
+        if isinstance(view, TwoPersonView):  # losses and metrics per person
+            prediction, target = view.split_persons(prediction), view.split_persons(target)
+            frame_mask, view = frame_mask.repeat_interleave(2, dim=0), view.person
+        predicted, real = view.geometry(prediction), view.geometry(target)
         if real.positions is None and not self._warned_no_positions:
             log.info(
                 "no body model for this representation: position, velocity, bone and foot losses are off"
             )
             self._warned_no_positions = True
         terms = vq_losses(
-            prediction=out.reconstruction,
-            target=motion,
+            prediction=prediction,
+            target=target,
             predicted_geometry=predicted,
             target_geometry=real,
             reconstruction_mask=view.reconstruction_mask(motion.device),

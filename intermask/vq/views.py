@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import torch
+from einops import rearrange
 from torch import nn
 
 from intermask.motion import interhuman as ih
@@ -131,3 +132,35 @@ class InterXView(nn.Module):
             (contacts, contacts[..., -1:, :]), dim=-2
         )  # repeat the last frame's label
         return Geometry(positions, rot6d, contacts)
+
+
+class TwoPersonView(nn.Module):
+    """Both persons as one image (the interaction-level VQ ablation, InterMask Table 2).
+
+    Features (B, T, 2, *F) -> (B, T, J, 2C): the per-joint channels of person 1, then person 2,
+    so one token grid describes the pair. Losses and geometry stay per person
+    (:meth:`split_persons` folds the persons into the batch).
+    """
+
+    def __init__(self, *, person: nn.Module) -> None:
+        super().__init__()
+        self.person = person
+        self.num_joints = person.num_joints
+        self.channels = 2 * person.channels
+        self.feature_shape = (2, *person.feature_shape)
+
+    def to_joints(self, features: torch.Tensor) -> torch.Tensor:
+        return rearrange(self.person.to_joints(features), "b t p j c -> b t j (p c)")
+
+    def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
+        return self.person.from_joints(rearrange(joints, "b t j (p c) -> b t p j c", p=2))
+
+    @staticmethod
+    def split_persons(features: torch.Tensor) -> torch.Tensor:
+        """(B, T, 2, *F) -> (2B, T, *F)."""
+        return rearrange(features, "b t p ... -> (b p) t ...")
+
+
+def person_view(view: nn.Module) -> nn.Module:
+    """The single-person view inside ``view`` (itself unless it is a TwoPersonView)."""
+    return view.person if isinstance(view, TwoPersonView) else view

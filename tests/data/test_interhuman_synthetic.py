@@ -56,3 +56,15 @@ def test_synthetic_interx(synthetic_interx_root):
         assert item["motion"].shape == (2, 150, 56, 6)
         assert item["length"] % 4 == 0 and 20 <= item["length"] <= 148
         assert item["actor"] in (1, 2) and 0 <= item["action_id"]
+
+
+def test_two_person_windows_hold_both_single_person_windows(synthetic_interhuman_root):
+    pairs = InterHumanDataset(root=synthetic_interhuman_root, split="val", mode="window", window_persons=2)
+    singles = InterHumanDataset(root=synthetic_interhuman_root, split="val", mode="window")
+    assert len(pairs) * 2 == len(singles)
+    item = pairs[len(pairs) - 1]
+    assert item["motion"].shape == (64, 2, 262) and item["person"] == 0
+    sequence, start = int(pairs.windows.sequence[-1]), int(pairs.windows.start[-1])
+    for person in (0, 1):
+        match = (singles.windows.sequence == 2 * sequence + person) & (singles.windows.start == start)
+        assert torch.equal(singles[int(match.nonzero()[0][0])]["motion"], item["motion"][:, person])

@@ -175,3 +175,39 @@ def test_interx_view_without_body_model_has_no_positions():
     with_body = InterXView(body_offsets=REST_OFFSETS).geometry(features)
     assert with_body.positions.shape == (2, 8, 22, 3) and with_body.contacts.shape == (2, 8, 4)
     assert not math.isnan(with_body.positions.sum().item())
+
+
+def test_interaction_level_vq_shares_one_token_grid_between_persons():
+    view = InterHumanView(mean=torch.zeros(262), std=torch.ones(262))
+    model = MotionVQVAE(
+        view=view,
+        encoder=MotionEncoder(num_joints=22, in_channels=24, width=16),
+        quantizer=ResidualQuantizer(num_quantizers=1, codebook_size=32, dim=16),
+        decoder=MotionDecoder(num_joints=22, out_channels=24, width=16),
+        persons=2,
+    )
+    pair = torch.randn(2, 16, 2, 262)
+    pair[..., ih.CONTACTS] = 0.0
+    joints = model.view.to_joints(pair)
+    assert joints.shape == (2, 16, 22, 24)
+    torch.testing.assert_close(joints[..., :12], ih.features_to_joint_view(pair[:, :, 0]))
+    back = model.view.from_joints(joints)
+    kept = torch.ones(262, dtype=torch.bool)
+    kept[ih.CONTACTS] = False
+    torch.testing.assert_close(back[..., kept], pair[..., kept])
+    out = model.train()(pair)
+    assert out.reconstruction.shape == pair.shape and out.indices.shape == (2, 1, 5, 4)
+    assert model.view.split_persons(pair).shape == (4, 16, 262)
+
+
+def test_encoder_channels_must_match_the_view():
+    with pytest.raises(
+        ValueError, match=r"encoder takes 22 joints x 12 channels, the 2-person view gives 22 x 24"
+    ):
+        MotionVQVAE(
+            view=InterHumanView(),
+            encoder=MotionEncoder(num_joints=22, in_channels=12, width=8),
+            quantizer=ResidualQuantizer(codebook_size=4, dim=8),
+            decoder=MotionDecoder(num_joints=22, out_channels=12, width=8),
+            persons=2,
+        )
