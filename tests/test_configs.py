@@ -73,7 +73,11 @@ def test_vq_ablations_are_config_selections(experiment, persons, rows):
 
     cfg = _compose(
         "train_vq",
-        [f"experiment={experiment}", "model.net.encoder.width=8", "model.net.quantizer.codebook_size=4"],
+        [
+            f"experiment={experiment}",
+            "model.net.encoder.width=8",
+            "model.net.quantizer.codebook_size=4",
+        ],
     )
     net = instantiate(cfg.model).net
     features = torch.randn(1, 16, 2, 262) if persons == 2 else torch.randn(1, 16, 262)

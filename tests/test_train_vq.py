@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -26,8 +27,8 @@ def _config(data_root: Path, output_dir: Path, overrides: list[str] = ()):
                 "model.net.quantizer.codebook_size=32",
                 "trainer=cpu",
                 "trainer.max_epochs=1",
-                "+trainer.limit_train_batches=3",
-                "+trainer.limit_val_batches=2",
+                "trainer.limit_train_batches=3",
+                "trainer.limit_val_batches=2",
                 "trainer.log_every_n_steps=1",
                 "callbacks.rich_progress_bar=null",
                 *overrides,
@@ -38,8 +39,12 @@ def _config(data_root: Path, output_dir: Path, overrides: list[str] = ()):
     return cfg
 
 
-def test_train_vq_writes_record_checkpoints_and_tensorboard(synthetic_interhuman_root, tmp_path):
-    metrics = train(_config(synthetic_interhuman_root, tmp_path))
+def test_train_vq_writes_record_checkpoints_and_tensorboard(
+    synthetic_interhuman_root, tmp_path, caplog
+):
+    with caplog.at_level("INFO", logger="intermask.train"):
+        metrics = train(_config(synthetic_interhuman_root, tmp_path))
+    assert re.search(r"VQVAEModule: \d+\.\d\dM parameters", caplog.text)
     assert metrics["val/mpjpe_mm"] > 0 and torch.isfinite(torch.tensor(metrics["train/loss"]))
     assert (tmp_path / "config.yaml").is_file() and (tmp_path / "run_record.json").is_file()
     assert (tmp_path / "checkpoints" / "last.ckpt").is_file()
