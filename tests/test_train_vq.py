@@ -67,9 +67,7 @@ def test_train_vq_writes_record_checkpoints_and_tensorboard(
     }
     assert expected <= tags, expected - tags
     # the checkpoint carries the normalization statistics and loads with weights_only=True
-    state = torch.load(
-        tmp_path / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True
-    )["state_dict"]
+    state = _last(tmp_path)["state_dict"]
     assert bool(state["net.view.has_statistics"]) and state["net.view.std"].shape == (262,)
     assert bool(state["net.quantizer.layers.0.initialized"])
 

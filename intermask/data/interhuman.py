@@ -32,6 +32,7 @@ from torch.utils.data import Dataset
 
 from intermask.data.captions import swap_left_right
 from intermask.data.common import (
+    check_item_options,
     ClipMeta,
     ItemKey,
     item_rng,
@@ -172,8 +173,7 @@ class InterHumanDataset(Dataset):
         seed: int = 3407,
         epoch: int = 0,
     ):
-        if mode not in ("interaction", "window"):
-            raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
+        check_item_options(mode=mode, window_persons=window_persons)
         if not 2 <= min_length <= max_length:
             raise ValueError(
                 f"need 2 <= min_length <= max_length, got {min_length} and {max_length}"
@@ -185,8 +185,6 @@ class InterHumanDataset(Dataset):
         self.layout = InterHumanLayout(Path(root))
         self.split, self.mode = split, mode
         self.max_length, self.min_length = max_length, min_length
-        if window_persons not in (1, 2):
-            raise ValueError(f"window_persons must be 1 or 2, got {window_persons}")
         self.window, self.stride, self.window_persons = window, stride, window_persons
         self.mirror, self.swap_persons = mirror, swap_persons
         self.normalizer, self.seed, self.epoch = normalizer, seed, epoch

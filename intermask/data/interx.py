@@ -34,6 +34,7 @@ from einops import rearrange
 from torch.utils.data import Dataset
 
 from intermask.data.common import (
+    check_item_options,
     ItemKey,
     check_motion_array,
     item_rng,
@@ -177,8 +178,7 @@ class InterXDataset(Dataset):
         seed: int = 3407,
         epoch: int = 0,
     ):
-        if mode not in ("interaction", "window"):
-            raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
+        check_item_options(mode=mode, window_persons=window_persons)
         if crop not in ("random", "start"):
             raise ValueError(f"crop must be 'random' or 'start', got {crop!r}")
         if not (unit_length >= 1 and 2 * unit_length <= min_length and unit_length <= max_length):
@@ -193,8 +193,6 @@ class InterXDataset(Dataset):
         self.split, self.mode, self.crop = split, mode, crop
         self.max_length, self.min_length, self.max_frames = max_length, min_length, max_frames
         self.unit_length, self.length_jitter = unit_length, length_jitter
-        if window_persons not in (1, 2):
-            raise ValueError(f"window_persons must be 1 or 2, got {window_persons}")
         self.window, self.stride, self.window_persons = window, stride, window_persons
         self.swap_persons, self.normalizer = swap_persons, normalizer
         self.seed, self.epoch = seed, epoch

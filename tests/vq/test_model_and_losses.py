@@ -68,18 +68,25 @@ def _geometry_pair():
     return view, target
 
 
-def test_losses_vanish_on_a_perfect_reconstruction():
-    view, target = _geometry_pair()
-    terms = vq_losses(
-        prediction=target,
+def _losses(view, prediction, target, *, frame_mask=None, commit=0.0, kind="smooth_l1"):
+    if frame_mask is None:
+        frame_mask = torch.ones(target.shape[:2], dtype=torch.bool)
+    return vq_losses(
+        prediction=prediction,
         target=target,
-        predicted_geometry=view.geometry(target),
+        predicted_geometry=view.geometry(prediction),
         target_geometry=view.geometry(target),
         reconstruction_mask=view.reconstruction_mask(target.device),
-        frame_mask=torch.ones(2, 8, dtype=torch.bool),
-        commit_loss=torch.tensor(0.5),
+        frame_mask=frame_mask,
+        commit_loss=torch.tensor(commit),
         weights=LossWeights(),
+        kind=kind,
     )
+
+
+def test_losses_vanish_on_a_perfect_reconstruction():
+    view, target = _geometry_pair()
+    terms = _losses(view, target, target, commit=0.5)
     assert (
         terms.reconstruction == 0
         and terms.positions == 0
@@ -99,17 +106,7 @@ def test_geometric_terms_measure_what_they_claim():
     turn = rotation_about_axis(torch.tensor(0.1), "y")
     base = rot6d_to_matrix(ih.split_features(target).rot6d)
     prediction[..., ih.ROTATIONS] = matrix_to_rot6d(turn @ base).flatten(-2)
-    terms = vq_losses(
-        prediction=prediction,
-        target=target,
-        predicted_geometry=view.geometry(prediction),
-        target_geometry=view.geometry(target),
-        reconstruction_mask=view.reconstruction_mask(target.device),
-        frame_mask=torch.ones(2, 8, dtype=torch.bool),
-        commit_loss=torch.tensor(0.0),
-        weights=LossWeights(),
-        kind="l1",
-    )
+    terms = _losses(view, prediction, target, kind="l1")
     assert terms.positions.item() == pytest.approx(
         0.01 / 3, rel=1e-4
     )  # one of three axes off by 1 cm
@@ -129,17 +126,7 @@ def test_foot_contact_penalises_sliding_planted_feet_only():
     positions[..., 8, 0] = 0.01 * frames[..., 0]  # right ankle too, but it is not planted
     prediction[..., ih.POSITIONS] = positions.flatten(-2)
     mask = torch.ones(2, 8, dtype=torch.bool)
-    terms = vq_losses(
-        prediction=prediction,
-        target=target,
-        predicted_geometry=view.geometry(prediction),
-        target_geometry=view.geometry(target),
-        reconstruction_mask=view.reconstruction_mask(target.device),
-        frame_mask=mask,
-        commit_loss=torch.tensor(0.0),
-        weights=LossWeights(),
-        kind="l1",
-    )
+    terms = _losses(view, prediction, target, frame_mask=mask, kind="l1")
     # one planted joint of 4, one axis of 3, 1 cm per step
     assert terms.foot_contact.item() == pytest.approx(0.01 / 12, rel=1e-4)
 
@@ -150,16 +137,7 @@ def test_padding_frames_do_not_count():
     prediction[:, 4:] += 10.0
     mask = torch.zeros(2, 8, dtype=torch.bool)
     mask[:, :4] = True
-    terms = vq_losses(
-        prediction=prediction,
-        target=target,
-        predicted_geometry=view.geometry(prediction),
-        target_geometry=view.geometry(target),
-        reconstruction_mask=view.reconstruction_mask(target.device),
-        frame_mask=mask,
-        commit_loss=torch.tensor(0.0),
-        weights=LossWeights(),
-    )
+    terms = _losses(view, prediction, target, frame_mask=mask)
     assert terms.reconstruction == 0 and terms.positions == 0 and terms.velocity == 0
 
 
