@@ -16,7 +16,7 @@ from torch.optim.lr_scheduler import LambdaLR
 from intermask.metrics.mpjpe import MPJPE
 from intermask.utils.schedules import warmup_multistep_factor
 from intermask.vq.losses import LossKind, LossTerms, LossWeights, vq_losses
-from intermask.vq.model import MotionVQVAE
+from intermask.vq.model import MotionVQVAE, VQVAEOutput
 from intermask.vq.views import InterHumanView, TwoPersonView, person_view
 
 log = logging.getLogger(__name__)
@@ -89,7 +89,14 @@ class VQVAEModule(L.LightningModule):
         if frame_mask is None:
             frame_mask = torch.ones(motion.shape[:2], dtype=torch.bool, device=motion.device)
         out = self.net(motion)
-        prediction, target, view = out.reconstruction, motion, self.net.view
+        with torch.autocast(device_type=motion.device.type, enabled=False):
+            # geometry (Gram-Schmidt, bone lengths, metres) and losses in float32 under bf16
+            return self._losses(out, motion.float(), frame_mask)
+
+    def _losses(
+        self, out: VQVAEOutput, motion: torch.Tensor, frame_mask: torch.Tensor
+    ) -> tuple[LossTerms, torch.Tensor, VQVAEOutput, Any]:
+        prediction, target, view = out.reconstruction.float(), motion, self.net.view
         if isinstance(view, TwoPersonView):  # losses and metrics per person
             prediction, target = view.split_persons(prediction), view.split_persons(target)
             frame_mask, view = frame_mask.repeat_interleave(2, dim=0), view.person

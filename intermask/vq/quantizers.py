@@ -89,7 +89,15 @@ class EMAQuantizer(nn.Module):
         self.register_buffer("initialized", torch.tensor(False))
 
     def forward(self, x: torch.Tensor) -> QuantizerOutput:
-        """(B, D, H, W) -> QuantizerOutput; updates the codebook in training mode."""
+        """(B, D, H, W) -> QuantizerOutput; updates the codebook in training mode.
+
+        Runs in float32 even under autocast: nearest-code search and EMA statistics in bf16 would
+        pick wrong codes and drift.
+        """
+        with torch.autocast(device_type=x.device.type, enabled=False):
+            return self._quantize(x.float())
+
+    def _quantize(self, x: torch.Tensor) -> QuantizerOutput:
         batch, _, height, width = x.shape
         flat = rearrange(x, "b d h w -> (b h w) d")
         if self.training and not bool(self.initialized):
@@ -98,7 +106,7 @@ class EMAQuantizer(nn.Module):
         dead = torch.zeros((), dtype=torch.long, device=x.device)
         if self.training:
             dead = self._ema_update(flat.detach().float(), indices)
-        quantized_flat = F.embedding(indices, self.codebook).to(flat.dtype)
+        quantized_flat = F.embedding(indices, self.codebook)
         commit_loss = F.mse_loss(flat, quantized_flat.detach())
         quantized_flat = flat + (quantized_flat - flat).detach()
         quantized = rearrange(quantized_flat, "(b h w) d -> b d h w", b=batch, h=height, w=width)

@@ -110,3 +110,17 @@ def test_quantization_dropout_keeps_a_prefix_of_layers():
 def test_invalid_options_are_rejected(kwargs, message):
     with pytest.raises(ValueError, match=message):
         EMAQuantizer(codebook_size=4, dim=2, **kwargs)
+
+
+def test_quantizer_runs_in_float32_under_bf16_autocast():
+    torch.manual_seed(0)
+    quantizer = ResidualQuantizer(num_quantizers=2, codebook_size=64, dim=16).train()
+    x = torch.randn(4, 16, 5, 8)
+    quantizer(x)  # initialise
+    quantizer.eval()
+    reference = quantizer(x)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        out = quantizer(x.to(torch.bfloat16))
+    assert out.quantized.dtype == torch.float32
+    # bf16 input rounding may move a few borderline vectors, never most of them
+    assert (out.indices == reference.indices).float().mean() > 0.9
