@@ -1,0 +1,233 @@
+"""The Inter-M Transformer: two persons' token maps + text -> logits over the codebook.
+
+Input process (section 3.2.2): learned token embedding (K + 3 entries, width 512) -> Linear to
+the model width D -> 2D sinusoidal encoding per person -> dropout. Then ``depth`` Inter-M
+blocks conditioned on ``c`` through AdaLN-Zero, and the output process (section 3.2.3): Linear
+-> GELU -> LayerNorm -> AdaLN shift/scale -> Linear to the K code logits.
+
+Text: frozen CLIP ViT-L/14@336px per-token features (computed outside this module) pass a
+trainable 2-layer TransformerEncoder and a LayerNorm; the feature at the end-of-text token,
+projected to D, is ``c``. It enters the network only through AdaLN.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+from intermask.interm.attention import MultiHeadAttention
+from intermask.interm.blocks import AdaLNModulation, InterMBlock, adaptive_norm, modulate
+from intermask.interm.position import add_grid_encoding
+from intermask.interm.tokens import Vocabulary, build_sequence, sequence_padding_mask, split_persons
+
+
+class TextFeatures(NamedTuple):
+    features: torch.Tensor  # (B, L, 768) frozen CLIP per-token features (after ln_final)
+    eot_index: torch.Tensor  # (B,) int64 position of the end-of-text token
+    padding_mask: torch.Tensor | None = None  # (B, L) True at padding; None = attend to all L
+
+
+class InterMOutput(NamedTuple):
+    logits_a: torch.Tensor  # (B, rows, T', K)
+    logits_b: torch.Tensor  # (B, rows, T', K)
+
+
+class OutputHead(nn.Module):
+    """(B, S, D) -> (B, S, K): Linear -> GELU -> LayerNorm -> AdaLN shift/scale -> Linear."""
+
+    def __init__(self, *, width: int, codebook_size: int) -> None:
+        super().__init__()
+        self.dense = nn.Linear(width, width)
+        self.activation = nn.GELU()
+        self.norm = adaptive_norm(width)
+        self.modulation = AdaLNModulation(width=width, chunks=2)
+        self.logits = nn.Linear(width, codebook_size)
+
+    def forward(self, x: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+        shift, scale = self.modulation(c)
+        return self.logits(modulate(self.norm(self.activation(self.dense(x))), shift, scale))
+
+
+def _normal_init(module: nn.Module) -> None:
+    if isinstance(module, nn.Linear | nn.Embedding):
+        nn.init.normal_(module.weight, mean=0.0, std=0.02)
+        if isinstance(module, nn.Linear) and module.bias is not None:
+            nn.init.zeros_(module.bias)
+
+
+class InterMTransformer(nn.Module):
+    """Collaborative masked-token model of two persons (InterMask section 3.2).
+
+    Defaults are the paper configuration (appendix C.1; the unstated sizes from the reference).
+
+    Args:
+        codebook_size: K motion codes; the vocabulary adds [MASK], [PAD], [SEP].
+        width: D, transformer width (384).
+        heads: attention heads (6).
+        depth: Inter-M blocks (6).
+        ff: FFN hidden width (1024).
+        dropout: dropout in blocks and after the input process (0.2).
+        token_embed_dim: width of the learned token embedding before its projection (512).
+        text_dim: CLIP token feature width (768 for ViT-L/14@336px).
+        text_layers, text_heads, text_ff, text_dropout: the trainable text encoder (2, 8, 2048,
+            0.1). Post-norm (``norm_first=False``) with GELU as in the reference, followed by
+            its final LayerNorm.
+        rows: body-part rows of the token map (5; 1 for the 1D-token ablation).
+        use_self_attention, use_spatio_temporal_attention, use_cross_attention: Table 3
+            ablations.
+        double_residual_quirk, cross_context_quirk: reproduce reference-code behaviour, see
+            :class:`~intermask.interm.blocks.InterMBlock`.
+    """
+
+    def __init__(
+        self,
+        *,
+        codebook_size: int = 1024,
+        width: int = 384,
+        heads: int = 6,
+        depth: int = 6,
+        ff: int = 1024,
+        dropout: float = 0.2,
+        token_embed_dim: int = 512,
+        text_dim: int = 768,
+        text_layers: int = 2,
+        text_heads: int = 8,
+        text_ff: int = 2048,
+        text_dropout: float = 0.1,
+        rows: int = 5,
+        use_self_attention: bool = True,
+        use_spatio_temporal_attention: bool = True,
+        use_cross_attention: bool = True,
+        double_residual_quirk: bool = False,
+        cross_context_quirk: bool = False,
+    ) -> None:
+        super().__init__()
+        if width % 4:
+            raise ValueError(
+                f"width must be divisible by 4 for the 2D positional encoding, got {width}"
+            )
+        self.vocabulary = Vocabulary(codebook_size)
+        self.codebook_size, self.rows, self.text_dim = codebook_size, rows, text_dim
+
+        self.token_embedding = nn.Embedding(self.vocabulary.size, token_embed_dim)
+        self.token_projection = nn.Linear(token_embed_dim, width)
+        self.input_dropout = nn.Dropout(dropout)
+
+        text_layer = nn.TransformerEncoderLayer(
+            d_model=text_dim,
+            nhead=text_heads,
+            dim_feedforward=text_ff,
+            dropout=text_dropout,
+            activation="gelu",
+            batch_first=True,
+            norm_first=False,
+        )
+        self.text_encoder = nn.TransformerEncoder(
+            text_layer, num_layers=text_layers, enable_nested_tensor=False
+        )
+        self.text_norm = nn.LayerNorm(text_dim)
+        # A dropped condition is the projection of a zero text feature, i.e. this layer's
+        # learned bias: a learned null condition without an extra parameter (the reference
+        # zeroes the CLIP feature the same way).
+        self.condition_projection = nn.Linear(text_dim, width)
+
+        self.blocks = nn.ModuleList(
+            InterMBlock(
+                width=width,
+                heads=heads,
+                ff=ff,
+                dropout=dropout,
+                use_self_attention=use_self_attention,
+                use_spatio_temporal_attention=use_spatio_temporal_attention,
+                use_cross_attention=use_cross_attention,
+                double_residual_quirk=double_residual_quirk,
+                cross_context_quirk=cross_context_quirk,
+            )
+            for _ in range(depth)
+        )
+        self.head = OutputHead(width=width, codebook_size=codebook_size)
+        self._init_weights()
+
+    def _init_weights(self) -> None:
+        # Reference: N(0, 0.02) for every Linear/Embedding outside the text encoder (which keeps
+        # PyTorch's defaults), attention in-projections Xavier, AdaLN regressors zero.
+        for part in (self.token_embedding, self.token_projection, self.condition_projection):
+            part.apply(_normal_init)
+        self.blocks.apply(_normal_init)
+        self.head.apply(_normal_init)
+        for module in self.modules():
+            if isinstance(module, AdaLNModulation | MultiHeadAttention):
+                module.reset_parameters()
+
+    def encode_condition(
+        self, text: TextFeatures | tuple, drop_condition: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Text features -> (B, D) condition ``c``; rows with ``drop_condition`` (B,) bool True
+        get the null condition (classifier-free guidance)."""
+        text = TextFeatures(*text)
+        features, eot_index = text.features, text.eot_index
+        if features.ndim != 3 or features.shape[-1] != self.text_dim:
+            raise ValueError(
+                f"text features must be (B, L, {self.text_dim}), got {tuple(features.shape)}"
+            )
+        batch = features.shape[0]
+        if eot_index.shape != (batch,):
+            raise ValueError(f"eot_index must be ({batch},), got {tuple(eot_index.shape)}")
+        hidden = self.text_norm(self.text_encoder(features, src_key_padding_mask=text.padding_mask))
+        eot = hidden[torch.arange(batch, device=hidden.device), eot_index]  # (B, text_dim)
+        if drop_condition is not None:
+            if drop_condition.shape != (batch,):
+                raise ValueError(
+                    f"drop_condition must be ({batch},), got {tuple(drop_condition.shape)}"
+                )
+            eot = eot.masked_fill(drop_condition.bool()[:, None], 0.0)
+        return self.condition_projection(eot)
+
+    def forward_with_condition(
+        self,
+        tokens_a: torch.Tensor,
+        tokens_b: torch.Tensor,
+        condition: torch.Tensor,
+        lengths_in_steps: torch.Tensor,
+    ) -> InterMOutput:
+        """Like :meth:`forward` with a precomputed (B, D) condition (e.g. conditional and null
+        conditions stacked for guidance)."""
+        if tokens_a.ndim != 3 or tokens_a.shape[1] != self.rows:
+            raise ValueError(f"tokens must be (B, {self.rows}, T'), got {tuple(tokens_a.shape)}")
+        steps = tokens_a.shape[-1]
+        sequence = build_sequence(
+            tokens_a,
+            tokens_b,
+            codebook_size=self.codebook_size,
+            lengths_in_steps=lengths_in_steps,
+        )  # (B, 2N + 1)
+        padding = sequence_padding_mask(sequence, codebook_size=self.codebook_size)
+        x = self.token_projection(self.token_embedding(sequence))  # (B, 2N + 1, D)
+        x = self.input_dropout(add_grid_encoding(x, rows=self.rows, steps=steps))
+        for block in self.blocks:
+            x = block(x, condition, padding, rows=self.rows)
+        logits = self.head(x, condition)  # (B, 2N + 1, K)
+        return InterMOutput(*split_persons(logits, rows=self.rows, steps=steps))
+
+    def forward(
+        self,
+        tokens_a: torch.Tensor,
+        tokens_b: torch.Tensor,
+        text: TextFeatures | tuple,
+        lengths_in_steps: torch.Tensor,
+        drop_condition: torch.Tensor | None = None,
+    ) -> InterMOutput:
+        """Token maps (B, rows, T') of each person -> code logits (B, rows, T', K) of each.
+
+        Tokens are codes, [MASK], [PAD] or -1; steps at or beyond ``lengths_in_steps`` (B,) are
+        padding whatever they hold. ``text`` is :class:`TextFeatures` or ``(features,
+        eot_index)``; ``drop_condition`` (B,) bool replaces ``c`` by the null condition.
+        """
+        condition = self.encode_condition(text, drop_condition)
+        return self.forward_with_condition(tokens_a, tokens_b, condition, lengths_in_steps)
+
+
+def count_parameters(module: nn.Module) -> int:
+    return sum(p.numel() for p in module.parameters())
