@@ -1,0 +1,141 @@
+import pytest
+import torch
+
+from intermask.interm.decoding import Edit, generate, guided_logits, null_condition
+from intermask.interm.model import TextFeatures
+
+K, ROWS, STEPS = 16, 5, 6
+LENGTHS = torch.tensor([6, 3, 5])
+ITERATIONS = 4
+
+
+def _valid(lengths: torch.Tensor = LENGTHS, steps: int = STEPS) -> torch.Tensor:
+    return (torch.arange(steps) < lengths[:, None])[:, None, None, :].expand(-1, 2, ROWS, -1)
+
+
+def _run(model, text, lengths=LENGTHS, **kwargs):
+    kwargs = {"iterations": ITERATIONS, "seeds": list(range(len(lengths))), **kwargs}
+    return generate(model, text, lengths, **kwargs)
+
+
+def _subset(text: TextFeatures, index: list[int]) -> TextFeatures:
+    return TextFeatures(text.features[index], text.eot_index[index])
+
+
+@pytest.fixture
+def tiny(build):
+    return build.model(), build.text(3)
+
+
+def test_output_is_codes_in_the_clip_and_minus_one_outside(tiny):
+    model, text = tiny
+    tokens = _run(model, text)
+    valid = _valid()
+    assert tokens.shape == (3, 2, ROWS, STEPS)
+    assert ((tokens[valid] >= 0) & (tokens[valid] < K)).all()  # no MASK, PAD or SEP
+    assert (tokens[~valid] == -1).all()
+
+
+def test_one_forward_pass_per_iteration(tiny):
+    model, text = tiny
+    calls = []
+    handle = model.head.register_forward_hook(lambda *_: calls.append(1))
+    try:
+        _run(model, text, iterations=5)
+        assert len(calls) == 5
+        calls.clear()
+        _run(model, None, iterations=3)
+        assert len(calls) == 3
+    finally:
+        handle.remove()
+
+
+def test_a_sample_does_not_depend_on_the_rest_of_the_batch(tiny):
+    model, text = tiny
+    together = _run(model, text, steps=STEPS, seeds=[11, 12, 13])
+    alone = _run(model, _subset(text, [0]), LENGTHS[:1], steps=STEPS, seeds=[11])
+    assert torch.equal(alone[0], together[0])
+    reordered = _run(model, _subset(text, [2, 0]), LENGTHS[[2, 0]], steps=STEPS, seeds=[13, 11])
+    assert torch.equal(reordered[0], together[2]) and torch.equal(reordered[1], together[0])
+    assert not torch.equal(_run(model, text, seeds=[99, 12, 13])[0], together[0])
+
+
+def test_same_seed_gives_the_same_result_and_training_mode_is_restored(tiny):
+    model, text = tiny
+    model.train()
+    first, second = _run(model, text), _run(model, text)
+    assert torch.equal(first, second) and model.training
+
+
+def test_cfg_scale_one_is_plain_conditional_sampling(tiny, monkeypatch):
+    model, text = tiny
+    plain = _run(model, text, cfg_scale=1.0)
+    # With the null condition replaced by the conditional one, uncond + s * (cond - uncond)
+    # is exactly cond for any s: the guided path must then give the same tokens.
+    condition = model.encode_condition(text)
+    monkeypatch.setattr(
+        "intermask.interm.decoding.null_condition", lambda *_: condition.detach().clone()
+    )
+    assert torch.equal(_run(model, text, cfg_scale=2.0), plain)
+
+
+def test_guidance_combines_conditional_and_null_logits(tiny):
+    model, text = tiny
+    tokens = torch.full((3, 2, ROWS, STEPS), model.vocabulary.mask_id)
+    with torch.no_grad():
+        cond, null = model.encode_condition(text), null_condition(model, 3, torch.device("cpu"))
+        c = guided_logits(model, tokens, cond, null, LENGTHS, 1.0)
+        u = guided_logits(model, tokens, None, null, LENGTHS, 2.0)
+        g = guided_logits(model, tokens, cond, null, LENGTHS, 3.0)
+    torch.testing.assert_close(g, u + 3.0 * (c - u), atol=1e-5, rtol=1e-5)
+
+
+def test_low_temperature_approaches_greedy_decoding(tiny):
+    model, text = tiny
+    with torch.no_grad():  # sharpen the logits so that greedy has no near-ties
+        model.head.logits.weight.mul_(50)
+    greedy = _run(model, text, temperature=0.0)
+    assert torch.equal(_run(model, text, temperature=0.0, seeds=[5, 6, 7]), greedy)
+    assert torch.equal(_run(model, text, temperature=1e-4, seeds=[5, 6, 7]), greedy)
+    assert not torch.equal(_run(model, text, temperature=5.0, top_k_ratio=1.0), greedy)
+
+
+def test_reaction_keeps_the_reference_person(tiny, build):
+    model, text = tiny
+    reference = torch.randint(0, K, (3, ROWS, STEPS), generator=torch.Generator().manual_seed(8))
+    valid = _valid()
+    for condition in (text, None):
+        tokens = _run(model, condition, reference_tokens=reference)
+        assert torch.equal(tokens[:, 0][valid[:, 0]], reference[valid[:, 0]])
+        assert (tokens[:, 0][~valid[:, 0]] == -1).all()
+        assert ((tokens[:, 1][valid[:, 1]] >= 0) & (tokens[:, 1][valid[:, 1]] < K)).all()
+
+
+def test_inpainting_changes_only_the_region(tiny):
+    model, text = tiny
+    fixed = torch.randint(0, K, (3, 2, ROWS, STEPS), generator=torch.Generator().manual_seed(9))
+    region = torch.zeros(3, 2, ROWS, STEPS, dtype=torch.bool)
+    region[:, :, :, 1:3] = True  # a middle stretch of both persons
+    region[0, 1] = True  # and all of person B in sample 0
+    tokens = _run(model, text, edit=Edit(fixed, region))
+    valid = _valid()
+    outside = valid & ~region
+    assert torch.equal(tokens[outside], fixed[outside])
+    assert ((tokens[valid & region] >= 0) & (tokens[valid & region] < K)).all()
+    assert (tokens[~valid] == -1).all()
+
+
+def test_errors_are_reported(tiny):
+    model, text = tiny
+    reference = torch.zeros(3, ROWS, STEPS, dtype=torch.long)
+    edit = Edit(torch.zeros(3, 2, ROWS, STEPS, dtype=torch.long), torch.ones(3, 2, ROWS, STEPS))
+    with pytest.raises(ValueError, match="exclusive"):
+        _run(model, text, reference_tokens=reference, edit=edit)
+    with pytest.raises(ValueError, match="reference_tokens must be"):
+        _run(model, text, steps=STEPS, reference_tokens=reference[:, :, :4])
+    with pytest.raises(ValueError, match="fixed tokens inside the clip"):
+        _run(model, text, reference_tokens=reference - 1)
+    with pytest.raises(ValueError, match="expected 3 seeds"):
+        _run(model, text, seeds=[1])
+    with pytest.raises(ValueError, match="iterations must be"):
+        _run(model, text, iterations=0)

@@ -1,0 +1,169 @@
+import math
+
+import pytest
+import torch
+
+from intermask.interm.masking import (
+    INTERACTION_TAU,
+    bert_corruption,
+    cosine_schedule,
+    interaction_masking,
+    inverse_cosine_schedule,
+    random_masking,
+    step_unroll_mask,
+    training_mask,
+    valid_tokens,
+)
+from intermask.interm.tokens import Vocabulary
+
+K, ROWS, STEPS = 16, 5, 8
+VOCAB = Vocabulary(K)
+
+
+def _tokens(batch: int, lengths: torch.Tensor, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    a = torch.randint(0, K, (batch, ROWS, STEPS), generator=g)
+    b = torch.randint(0, K, (batch, ROWS, STEPS), generator=g)
+    pad = torch.arange(STEPS) >= lengths[:, None]
+    return a.masked_fill(pad[:, None], -1), b.masked_fill(pad[:, None], -1)
+
+
+def test_cosine_schedule_endpoints_and_inverse():
+    assert cosine_schedule(0.0).item() == 1.0
+    assert cosine_schedule(1.0).item() == 0.0  # exactly, not 6e-17
+    assert cosine_schedule(0.5).item() == pytest.approx(math.cos(math.pi / 4))
+    tau = torch.linspace(0, 1, 11, dtype=torch.float64)
+    torch.testing.assert_close(inverse_cosine_schedule(cosine_schedule(tau)), tau)
+    assert cosine_schedule(INTERACTION_TAU).item() == pytest.approx(0.5)
+
+
+def test_random_masking_follows_the_schedule_with_given_tau():
+    lengths = torch.tensor([8, 5, 1, 3])
+    a, b = _tokens(4, lengths)
+    tau = torch.tensor([0.0, 0.5, 0.9, 1.0], dtype=torch.float64)
+    mask = random_masking(a, b, lengths, tau=tau, generator=torch.Generator().manual_seed(0))
+    n_valid = 2 * ROWS * lengths
+    expected = [
+        max(1, math.ceil(math.cos(math.pi * t / 2) * n - 1e-9))
+        for t, n in zip(tau.tolist(), n_valid.tolist(), strict=True)
+    ]
+    expected[3] = 1  # gamma(1) = 0: still at least one token
+    assert mask.flatten(1).sum(1).tolist() == expected
+
+
+def test_random_masking_ratio_averages_to_the_schedule_and_never_masks_pads():
+    batch = 4000
+    lengths = torch.randint(1, STEPS + 1, (batch,), generator=torch.Generator().manual_seed(3))
+    a, b = _tokens(batch, lengths)
+    mask = random_masking(a, b, lengths, generator=torch.Generator().manual_seed(1))
+    valid = valid_tokens(torch.stack([a, b], 1), lengths)
+    assert not (mask & ~valid).any()
+    assert (mask.flatten(1).sum(1) >= 1).all()
+    ratio = mask.flatten(1).sum(1).double() / valid.flatten(1).sum(1)
+    # E[cos(pi tau / 2)] = 2 / pi for tau ~ U(0, 1); ceil adds < 1 / n per sample
+    assert 2 / math.pi - 0.01 < ratio.mean().item() < 2 / math.pi + 0.04
+
+
+def test_random_masking_is_uniform_over_valid_positions():
+    batch = 3000
+    lengths = torch.full((batch,), STEPS)
+    a, b = _tokens(batch, lengths)
+    tau = torch.full((batch,), 2 / 3, dtype=torch.float64)  # ratio 0.5
+    mask = random_masking(a, b, lengths, tau=tau, generator=torch.Generator().manual_seed(2))
+    frequency = mask.double().mean(0)
+    assert (frequency - 0.5).abs().max() < 0.05
+
+
+def test_interaction_masking_masks_exactly_one_persons_valid_tokens():
+    batch = 200
+    lengths = torch.randint(0, STEPS + 1, (batch,), generator=torch.Generator().manual_seed(4))
+    a, b = _tokens(batch, lengths)
+    mask = interaction_masking(a, b, lengths, generator=torch.Generator().manual_seed(0))
+    valid = valid_tokens(torch.stack([a, b], 1), lengths)
+    masked_a, masked_b = mask[:, 0].flatten(1).any(1), mask[:, 1].flatten(1).any(1)
+    nonempty = lengths > 0
+    assert not (masked_a & masked_b).any()
+    assert (masked_a | masked_b)[nonempty].all()
+    person = masked_b.long()
+    chosen = mask[torch.arange(batch), person]
+    assert torch.equal(chosen[nonempty], valid[torch.arange(batch), person][nonempty])
+    assert 0.35 < masked_a[nonempty].double().mean() < 0.65
+
+
+def test_training_mask_mixes_with_p_random_and_reports_tau():
+    batch = 2000
+    lengths = torch.full((batch,), STEPS)
+    a, b = _tokens(batch, lengths)
+    out = training_mask(a, b, lengths, p_random=0.8, generator=torch.Generator().manual_seed(5))
+    assert 0.77 < out.is_random.double().mean() < 0.83
+    interaction = ~out.is_random
+    assert (out.tau[interaction] == INTERACTION_TAU).all()
+    one_person = out.mask[interaction].flatten(2).all(2).sum(1)
+    assert (one_person == 1).all()
+    assert ((out.tau[out.is_random] >= 0) & (out.tau[out.is_random] <= 1)).all()
+    with pytest.raises(ValueError, match="p_random must lie in"):
+        training_mask(a, b, lengths, p_random=1.5)
+
+
+def test_bert_corruption_proportions():
+    batch = 500
+    lengths = torch.full((batch,), STEPS)
+    a, b = _tokens(batch, lengths)
+    tokens = torch.stack([a, b], 1)
+    mask = torch.rand(tokens.shape, generator=torch.Generator().manual_seed(0)) < 0.5
+    out = bert_corruption(tokens, mask, VOCAB, generator=torch.Generator().manual_seed(1))
+    n = mask.sum().item()
+    assert not (out.is_random & out.is_mask).any()
+    assert torch.equal(out.tokens[~mask], tokens[~mask])
+    assert (out.tokens[out.is_mask] == VOCAB.mask_id).all()
+    assert ((out.tokens[out.is_random] >= 0) & (out.tokens[out.is_random] < K)).all()
+    kept = mask & ~out.is_random & ~out.is_mask
+    assert torch.equal(out.tokens[kept], tokens[kept])
+    assert out.is_random.sum().item() / n == pytest.approx(0.1, abs=0.01)
+    assert out.is_mask.sum().item() / n == pytest.approx(0.9 * 0.88, abs=0.01)
+    assert kept.sum().item() / n == pytest.approx(0.9 * 0.12, abs=0.01)
+    momask = bert_corruption(tokens, mask, VOCAB, mask_prob=8 / 9)
+    assert momask.is_mask.sum().item() / n == pytest.approx(0.8, abs=0.01)
+    with pytest.raises(ValueError, match="mask_prob must lie in"):
+        bert_corruption(tokens, mask, VOCAB, mask_prob=2.0)
+
+
+def test_step_unroll_keeps_the_confident_predictions():
+    lengths = torch.tensor([8, 4])
+    a, b = _tokens(2, lengths)
+    tokens = torch.stack([a, b], 1)
+    valid = valid_tokens(tokens, lengths)
+    mask = valid.clone()  # everything masked
+    corrupted = tokens.masked_fill(mask, VOCAB.mask_id)
+    g = torch.Generator().manual_seed(0)
+    logits = torch.randn(*tokens.shape, K, generator=g) * 3
+    tau = torch.tensor([0.0, 0.0], dtype=torch.float64)
+    out = step_unroll_mask(logits, corrupted, mask, tau, lengths, VOCAB, tau_step=0.5)
+    confidence, prediction = logits.softmax(-1).max(-1)
+    assert torch.allclose(out.tau, torch.full((2,), 0.5, dtype=torch.float64))
+    for i, n in enumerate((2 * ROWS * lengths).tolist()):
+        remasked = out.remasked[i]
+        assert remasked.sum().item() == math.ceil(math.cos(math.pi / 4) * n)
+        retained = valid[i] & ~remasked
+        # every retained prediction is at least as confident as every re-masked one
+        assert confidence[i][retained].min() >= confidence[i][remasked].max()
+        assert torch.equal(out.tokens[i][retained], prediction[i][retained])
+        assert (out.tokens[i][remasked] == VOCAB.mask_id).all()
+        assert torch.equal(out.mask[i], remasked)
+        assert (out.tokens[i][~valid[i]] == -1).all()
+
+
+def test_step_unroll_only_touches_mask_token_inputs_and_keeps_bert_positions_as_targets():
+    lengths = torch.tensor([8])
+    a, b = _tokens(1, lengths)
+    tokens = torch.stack([a, b], 1)
+    mask = valid_tokens(tokens, lengths)
+    corruption = bert_corruption(tokens, mask, VOCAB, generator=torch.Generator().manual_seed(3))
+    logits = torch.randn(*tokens.shape, K, generator=torch.Generator().manual_seed(4))
+    tau = torch.tensor([0.99], dtype=torch.float64)  # tau_next = 1: gamma 0 -> one token
+    out = step_unroll_mask(logits, corruption.tokens, mask, tau, lengths, VOCAB)
+    assert out.remasked.sum().item() == 1
+    not_mask_input = ~corruption.is_mask
+    assert torch.equal(out.tokens[not_mask_input], corruption.tokens[not_mask_input])
+    assert out.mask[not_mask_input & mask].all()  # random/kept positions stay loss targets
+    assert torch.equal(out.mask & corruption.is_mask, out.remasked)
