@@ -1,0 +1,250 @@
+"""InterMModule: trains the Inter-M Transformer (masking, two-stage loss, optimizer, logging).
+
+The frozen motion tokenizer and the frozen text encoder are *not* submodules: they are kept in
+a plain attribute (:class:`_Frozen`), so ``state_dict``, checkpoints, ``parameters()`` (hence
+the optimizer), ``.train()`` and Lightning's device moves never see them. Checkpoints hold the
+transformer only; the VQ-VAE and text encoder are rebuilt from their own checkpoint / config.
+Before every step they are moved to the module's device (a no-op once they are there).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, NamedTuple
+
+import lightning as L
+import torch
+import torch.nn.functional as F
+from torch.optim import Optimizer
+from torch.optim.lr_scheduler import LambdaLR
+
+from intermask.interm.masking import (
+    P_RANDOM,
+    bert_corruption,
+    stack_persons,
+    step_unroll_mask,
+    training_mask,
+)
+from intermask.interm.model import InterMTransformer, TextFeatures
+from intermask.text.cache import TextFeatureCache
+from intermask.utils.schedules import warmup_multistep_factor
+from intermask.vq.model import MotionVQVAE
+from intermask.vq.views import TwoPersonView
+
+FRAMES_PER_STEP = 4  # the VQ-VAE downsamples time by 4 (two stride-2 stages)
+
+
+class InterMLosses(NamedTuple):
+    total: torch.Tensor  # () stage 1 + stage 2
+    stage1: torch.Tensor  # () CE over the stage-1 masked tokens
+    stage2: torch.Tensor  # () CE over the step-unroll tokens (0 when step_unroll is off)
+    masked_accuracy: torch.Tensor  # () stage-1 argmax accuracy over the masked tokens
+
+
+@dataclass
+class _Frozen:
+    """Holder that hides the frozen networks from ``nn.Module`` registration."""
+
+    vq: MotionVQVAE
+    text: TextFeatureCache
+
+
+def masked_cross_entropy(
+    logits: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor
+) -> torch.Tensor:
+    """(B, 2, rows, T', K) logits, (B, 2, rows, T') codes and bool mask -> () mean CE over the
+    masked tokens of the whole batch (the reference's ``ignore_index`` mean). An empty mask
+    gives a zero that still carries the graph."""
+    if not bool(mask.any()):
+        return logits.sum() * 0.0
+    return F.cross_entropy(logits[mask].float(), targets[mask])
+
+
+def masked_accuracy(
+    logits: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor
+) -> torch.Tensor:
+    """Share of masked tokens whose argmax is the true code (0 for an empty mask)."""
+    if not bool(mask.any()):
+        return logits.new_zeros(())
+    return (logits[mask].argmax(dim=-1) == targets[mask]).float().mean()
+
+
+class InterMModule(L.LightningModule):
+    """Trains :class:`InterMTransformer` on interaction batches of the DataModule.
+
+    Batch: ``motion`` (B, 2, T, *F) normalized features, ``length`` (B,) frames, ``caption``
+    list of B strings.
+
+    Args:
+        net: the Inter-M Transformer (its ``codebook_size`` and ``rows`` must match ``vq``).
+        vq: the trained single-person VQ-VAE; frozen, eval mode, not checkpointed. Tokens are
+            its first quantizer layer (the base codes, section 3.2).
+        text: feature cache in front of the frozen CLIP text encoder; not checkpointed.
+        optimizer: partial optimizer taking the parameters (paper: AdamW lr 2e-4).
+        p_random: p_r, random- vs interaction-masking probability (section 3.2.1, 0.8).
+        condition_drop: per-sample probability of the null condition (classifier-free
+            guidance, 0.1).
+        step_unroll: add the second, step-unroll pass (section 3.2.1 stage 2).
+        warmup_fraction: linear warm-up length as a fraction of all optimizer steps. The paper
+            warms up for a quarter epoch, i.e. ``0.25 / max_epochs``; the config computes it.
+        lr_milestones, lr_gamma: the learning rate is multiplied by ``lr_gamma`` (1/3) at these
+            fractions of training (0.5, 0.7, 0.85).
+    """
+
+    def __init__(
+        self,
+        *,
+        net: InterMTransformer,
+        vq: MotionVQVAE,
+        text: TextFeatureCache,
+        optimizer: Callable[..., Optimizer],
+        warmup_fraction: float,
+        p_random: float = P_RANDOM,
+        condition_drop: float = 0.1,
+        step_unroll: bool = True,
+        lr_milestones: Sequence[float] = (0.5, 0.7, 0.85),
+        lr_gamma: float = 1 / 3,
+    ) -> None:
+        super().__init__()
+        if isinstance(vq.view, TwoPersonView):
+            raise ValueError("the Inter-M Transformer needs a single-person VQ-VAE, got persons=2")
+        vq_codes = vq.quantizer.layers[0].codebook_size
+        if vq_codes != net.codebook_size:
+            raise ValueError(
+                f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"
+            )
+        if text.encoder.width != net.text_dim:
+            raise ValueError(
+                f"net.text_dim ({net.text_dim}) must equal the text encoder width ({text.encoder.width})"
+            )
+        for name, prob in (("p_random", p_random), ("condition_drop", condition_drop)):
+            if not 0.0 <= prob <= 1.0:
+                raise ValueError(f"{name} must lie in [0, 1], got {prob}")
+        if not 0.0 <= warmup_fraction < 1.0:
+            raise ValueError(f"warmup_fraction must lie in [0, 1), got {warmup_fraction}")
+        self.net = net
+        vq.eval().requires_grad_(False)
+        self._frozen = _Frozen(vq=vq, text=text)
+        self.optimizer_factory = optimizer
+        # plain Python values only, so checkpoints load with torch.load(weights_only=True)
+        self.save_hyperparameters(
+            {
+                "p_random": float(p_random),
+                "condition_drop": float(condition_drop),
+                "step_unroll": bool(step_unroll),
+                "warmup_fraction": float(warmup_fraction),
+                "lr_milestones": [float(m) for m in lr_milestones],
+                "lr_gamma": float(lr_gamma),
+            },
+            logger=False,
+        )
+
+    @property
+    def vq(self) -> MotionVQVAE:
+        return self._frozen.vq
+
+    @property
+    def text(self) -> TextFeatureCache:
+        return self._frozen.text
+
+    def _move_frozen(self, device: torch.device) -> None:
+        if next(self.vq.parameters()).device != device:
+            self.vq.to(device)
+        if self.text.encoder.device != device:
+            self.text.encoder.to(device)
+
+    def tokenize(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Batch -> (B, 2, rows, T') base-layer tokens (-1 on padding) and (B,) lengths in steps.
+
+        Lengths are rounded down and time cropped to a multiple of 4 frames.
+        """
+        motion, lengths = batch["motion"], batch["length"]
+        if motion.ndim < 4 or motion.shape[1] != 2:
+            raise ValueError(f"motion must be (B, 2, T, *F), got {tuple(motion.shape)}")
+        frames = motion.shape[2] - motion.shape[2] % FRAMES_PER_STEP
+        lengths = lengths.to(motion.device).long().clamp(max=frames)
+        lengths = lengths - lengths % FRAMES_PER_STEP
+        self._move_frozen(motion.device)
+        # nearest-code search in float32 even under bf16 autocast: rounding could change codes
+        with torch.autocast(device_type=motion.device.type, enabled=False):
+            tokens = [
+                self.vq.encode(motion[:, person, :frames].float(), lengths)[:, 0]  # (B, rows, T')
+                for person in range(2)
+            ]
+        return stack_persons(*tokens), lengths // FRAMES_PER_STEP
+
+    def encode_text(self, captions: Sequence[str]) -> TextFeatures:
+        features = self.text.get_or_encode(list(captions))
+        return TextFeatures(*(t.to(self.device) for t in features))
+
+    def _forward(self, tokens, text, lengths_in_steps, drop) -> torch.Tensor:
+        out = self.net(tokens[:, 0], tokens[:, 1], text, lengths_in_steps, drop)
+        return torch.stack([out.logits_a, out.logits_b], dim=1)  # (B, 2, rows, T', K)
+
+    def compute_losses(self, batch: dict[str, Any], *, condition_drop: float) -> InterMLosses:
+        """Stage-1 masked CE (random / interaction masking + BERT corruption) and, with
+        ``step_unroll``, the stage-2 CE on the re-masked least confident predictions."""
+        targets, lengths_in_steps = self.tokenize(batch)
+        text = self.encode_text(batch["caption"])
+        vocabulary = self.net.vocabulary
+        masking = training_mask(
+            targets[:, 0], targets[:, 1], lengths_in_steps, p_random=self.hparams.p_random
+        )
+        corrupted = bert_corruption(targets, masking.mask, vocabulary)
+        drop = torch.rand(targets.shape[0], device=targets.device) < condition_drop  # (B,)
+        logits = self._forward(corrupted.tokens, text, lengths_in_steps, drop)
+        stage1 = masked_cross_entropy(logits, targets, masking.mask)
+        accuracy = masked_accuracy(logits.detach(), targets, masking.mask)
+        stage2 = stage1.new_zeros(())
+        if self.hparams.step_unroll:
+            unroll = step_unroll_mask(
+                logits.detach(),
+                corrupted.tokens,
+                masking.mask,
+                masking.tau,
+                lengths_in_steps,
+                vocabulary,
+            )
+            logits2 = self._forward(unroll.tokens, text, lengths_in_steps, drop)
+            stage2 = masked_cross_entropy(logits2, targets, unroll.mask)
+        return InterMLosses(stage1 + stage2, stage1, stage2, accuracy)
+
+    def _log_losses(self, prefix: str, losses: InterMLosses, batch_size: int) -> None:
+        sync = prefix == "val"
+        self.log(
+            f"{prefix}/loss", losses.total, batch_size=batch_size, prog_bar=True, sync_dist=sync
+        )
+        self.log(f"{prefix}/loss_stage1", losses.stage1, batch_size=batch_size, sync_dist=sync)
+        self.log(f"{prefix}/loss_stage2", losses.stage2, batch_size=batch_size, sync_dist=sync)
+        self.log(
+            f"{prefix}/masked_accuracy",
+            losses.masked_accuracy,
+            batch_size=batch_size,
+            sync_dist=sync,
+        )
+
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        losses = self.compute_losses(batch, condition_drop=self.hparams.condition_drop)
+        self._log_losses("train", losses, batch["motion"].shape[0])
+        return losses.total
+
+    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
+        with torch.no_grad():
+            losses = self.compute_losses(batch, condition_drop=0.0)
+        self._log_losses("val", losses, batch["motion"].shape[0])
+
+    def configure_optimizers(self) -> dict[str, Any]:
+        optimizer = self.optimizer_factory(params=self.parameters())
+        schedule = partial(
+            warmup_multistep_factor,
+            total_steps=max(int(self.trainer.estimated_stepping_batches), 1),
+            warmup_fraction=self.hparams.warmup_fraction,
+            milestones=tuple(self.hparams.lr_milestones),
+            gamma=self.hparams.lr_gamma,
+        )
+        return {
+            "optimizer": optimizer,
+            "lr_scheduler": {"scheduler": LambdaLR(optimizer, schedule), "interval": "step"},
+        }
