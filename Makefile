@@ -14,7 +14,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq tb clean
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-gen tb clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -59,6 +59,13 @@ data-stats: install ## compute normalization statistics: make data-stats ROOT=da
 
 train-vq: install ## train the VQ-VAE: make train-vq [DATA=synthetic|synthetic_interx|interhuman|interx] [ARGS="trainer.max_epochs=3"]
 	$(PY) -m intermask.train --config-name train_vq data=$(DATA) $(ARGS)
+
+# the newest VQ run's last.ckpt unless VQ_CKPT is given
+VQ_CKPT ?= $(shell ls -t outputs/train_vq/runs/*/checkpoints/last.ckpt 2>/dev/null | head -n 1)
+
+train-gen: install ## train Inter-M on frozen VQ tokens: make train-gen [VQ_CKPT=.../last.ckpt] [DATA=...] [ARGS="..."]
+	@test -n "$(VQ_CKPT)" || { echo "train-gen: no VQ checkpoint; run make train-vq or pass VQ_CKPT=<run>/checkpoints/last.ckpt" >&2; exit 2; }
+	$(PY) -m intermask.train --config-name train_gen data=$(DATA) vq_ckpt=$(VQ_CKPT) $(ARGS)
 
 tb: install ## TensorBoard over all runs: make tb [LOGDIR=outputs]
 	$(VENV)/bin/tensorboard --logdir $(or $(LOGDIR),outputs) --bind_all

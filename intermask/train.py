@@ -12,12 +12,15 @@ from typing import Any
 import hydra
 import lightning as L
 from hydra.utils import instantiate
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
 CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
+# ${div:a,b} in configs, e.g. the generator's warm-up of a quarter epoch as a share of all steps
+if not OmegaConf.has_resolver("div"):
+    OmegaConf.register_new_resolver("div", lambda numerator, denominator: numerator / denominator)
 
 
 def instantiate_all(group: DictConfig | None) -> list[Any]:

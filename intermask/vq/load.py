@@ -1,0 +1,34 @@
+"""Rebuild a trained tokenizer from a train_vq run (used frozen by the generator)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
+
+from intermask.vq.model import MotionVQVAE
+
+
+def load_vq(checkpoint: str | Path, *, map_location: str = "cpu") -> MotionVQVAE:
+    """The frozen (eval) MotionVQVAE of a ``train_vq`` run.
+
+    checkpoint: ``<run>/checkpoints/<name>.ckpt``; the network is rebuilt from the run's resolved
+    ``<run>/config.yaml`` and loaded strictly (weights only), statistics buffers included.
+    """
+    checkpoint = Path(checkpoint)
+    if not checkpoint.is_file():
+        raise FileNotFoundError(f"{checkpoint}: VQ checkpoint not found")
+    config_path = checkpoint.parent.parent / "config.yaml"
+    if not config_path.is_file():
+        raise FileNotFoundError(
+            f"{config_path}: the run config of the VQ checkpoint is missing "
+            f"(expected <run>/config.yaml beside <run>/checkpoints/)"
+        )
+    net = instantiate(OmegaConf.load(config_path).model.net)
+    state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
+    net.load_state_dict(
+        {k.removeprefix("net."): v for k, v in state.items() if k.startswith("net.")}
+    )
+    return net.eval().requires_grad_(False)

@@ -1,0 +1,88 @@
+"""The train_gen job end to end: a tiny tokenizer run, then Inter-M on its frozen tokens."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import open_dict
+from test_train_vq import _config as vq_config
+
+from intermask.train import CONFIG_DIR, train
+from intermask.vq.load import load_vq
+
+
+@pytest.fixture(scope="module")
+def vq_checkpoint(synthetic_interhuman_root, tmp_path_factory) -> Path:
+    run = tmp_path_factory.mktemp("vq_run")
+    train(vq_config(synthetic_interhuman_root, run))
+    return run / "checkpoints" / "last.ckpt"
+
+
+def _gen_config(data_root: Path, vq_ckpt: Path, output_dir: Path):
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(
+            "train_gen",
+            overrides=[
+                "data=synthetic",
+                f"data.root={data_root}",
+                "data.batch_size=4",
+                "data.num_workers=0",
+                "text=tiny_random",
+                f"text.cache_dir={output_dir / 'text_cache'}",
+                f"vq_ckpt={vq_ckpt}",
+                "model.net.codebook_size=32",  # the tiny tokenizer's codebook
+                "model.net.width=32",
+                "model.net.heads=2",
+                "model.net.depth=1",
+                "model.net.ff=64",
+                "model.net.token_embed_dim=32",
+                "model.net.text_dim=64",  # the tiny text tower's width
+                "model.net.text_layers=1",
+                "model.net.text_heads=2",
+                "model.net.text_ff=64",
+                "trainer=cpu",
+                "trainer.max_epochs=1",
+                "trainer.limit_train_batches=2",
+                "trainer.limit_val_batches=1",
+                "callbacks.rich_progress_bar=null",
+            ],
+        )
+    with open_dict(cfg):
+        cfg.paths.output_dir = str(output_dir)
+    return cfg
+
+
+def test_train_gen_learns_on_frozen_tokens(synthetic_interhuman_root, vq_checkpoint, tmp_path):
+    vq_before = load_vq(vq_checkpoint).state_dict()
+    metrics = train(_gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path))
+    assert torch.isfinite(torch.tensor(metrics["val/loss"])) and metrics["val/loss"] > 0
+    checkpoint = torch.load(
+        tmp_path / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True
+    )
+    assert checkpoint["global_step"] == 2
+    assert all(key.startswith("net.") for key in checkpoint["state_dict"])  # frozen parts stay out
+    vq_after = load_vq(vq_checkpoint).state_dict()
+    assert all(torch.equal(vq_before[key], vq_after[key]) for key in vq_before)
+
+
+def test_warmup_is_a_quarter_of_the_first_epoch():
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose("train_gen", overrides=["vq_ckpt=unused", "paths.output_dir=/tmp/unused"])
+    assert cfg.model.warmup_fraction == pytest.approx(0.25 / 500)
+    assert cfg.model.optimizer.weight_decay == 1e-5 and cfg.data.batch_size == 52
+    assert cfg.model.net.width == 384 and cfg.model.net.depth == 6 and cfg.model.net.heads == 6
+
+
+def test_load_vq_names_what_is_missing(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nowhere.ckpt: VQ checkpoint not found"):
+        load_vq(tmp_path / "nowhere.ckpt")
+    lonely = tmp_path / "run" / "checkpoints" / "last.ckpt"
+    lonely.parent.mkdir(parents=True)
+    lonely.write_bytes(b"")
+    with pytest.raises(
+        FileNotFoundError, match=r"run/config.yaml: the run config of the VQ checkpoint is missing"
+    ):
+        load_vq(lonely)
