@@ -9,6 +9,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import open_dict
 from test_train_vq import _config as vq_config
+from test_train_vq import _last
 
 from intermask.train import CONFIG_DIR, train
 from intermask.vq.load import load_vq
@@ -59,9 +60,7 @@ def test_train_gen_learns_on_frozen_tokens(synthetic_interhuman_root, vq_checkpo
     vq_before = load_vq(vq_checkpoint).state_dict()
     metrics = train(_gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path))
     assert torch.isfinite(torch.tensor(metrics["val/loss"])) and metrics["val/loss"] > 0
-    checkpoint = torch.load(
-        tmp_path / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True
-    )
+    checkpoint = _last(tmp_path)
     assert checkpoint["global_step"] == 2
     assert all(key.startswith("net.") for key in checkpoint["state_dict"])  # frozen parts stay out
     vq_after = load_vq(vq_checkpoint).state_dict()

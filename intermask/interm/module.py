@@ -11,14 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import partial
 from typing import Any, NamedTuple
 
 import lightning as L
 import torch
 import torch.nn.functional as F
 from torch.optim import Optimizer
-from torch.optim.lr_scheduler import LambdaLR
 
 from intermask.interm.masking import (
     P_RANDOM,
@@ -29,7 +27,7 @@ from intermask.interm.masking import (
 )
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.text.cache import TextFeatureCache
-from intermask.utils.schedules import warmup_multistep_factor
+from intermask.utils.schedules import warmup_multistep_optimizers
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.views import TwoPersonView
 
@@ -236,15 +234,10 @@ class InterMModule(L.LightningModule):
         self._log_losses("val", losses, batch["motion"].shape[0])
 
     def configure_optimizers(self) -> dict[str, Any]:
-        optimizer = self.optimizer_factory(params=self.parameters())
-        schedule = partial(
-            warmup_multistep_factor,
-            total_steps=max(int(self.trainer.estimated_stepping_batches), 1),
+        return warmup_multistep_optimizers(
+            self,
+            self.optimizer_factory,
             warmup_fraction=self.hparams.warmup_fraction,
-            milestones=tuple(self.hparams.lr_milestones),
+            milestones=self.hparams.lr_milestones,
             gamma=self.hparams.lr_gamma,
         )
-        return {
-            "optimizer": optimizer,
-            "lr_scheduler": {"scheduler": LambdaLR(optimizer, schedule), "interval": "step"},
-        }

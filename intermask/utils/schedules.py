@@ -3,7 +3,13 @@
 from __future__ import annotations
 
 import bisect
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from functools import partial
+from typing import Any
+
+import lightning as L
+from torch.optim import Optimizer
+from torch.optim.lr_scheduler import LambdaLR
 
 
 def warmup_multistep_factor(
@@ -27,3 +33,27 @@ def warmup_multistep_factor(
         return (step + 1) / warmup_steps
     boundaries = sorted(int(m * total_steps) for m in milestones)
     return gamma ** bisect.bisect_right(boundaries, step)
+
+
+def warmup_multistep_optimizers(
+    module: L.LightningModule,
+    optimizer_factory: Callable[..., Optimizer],
+    *,
+    warmup_fraction: float,
+    milestones: Sequence[float],
+    gamma: float,
+) -> dict[str, Any]:
+    """``configure_optimizers`` result: the module's optimizer with the warm-up multistep schedule
+    over the trainer's total optimizer steps, stepped every step."""
+    optimizer = optimizer_factory(params=module.parameters())
+    schedule = partial(
+        warmup_multistep_factor,
+        total_steps=max(int(module.trainer.estimated_stepping_batches), 1),
+        warmup_fraction=warmup_fraction,
+        milestones=tuple(milestones),
+        gamma=gamma,
+    )
+    return {
+        "optimizer": optimizer,
+        "lr_scheduler": {"scheduler": LambdaLR(optimizer, schedule), "interval": "step"},
+    }

@@ -5,16 +5,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import asdict
-from functools import partial
 from typing import Any
 
 import lightning as L
 import torch
 from torch.optim import Optimizer
-from torch.optim.lr_scheduler import LambdaLR
 
 from intermask.metrics.mpjpe import MPJPE
-from intermask.utils.schedules import warmup_multistep_factor
+from intermask.utils.schedules import warmup_multistep_optimizers
 from intermask.vq.losses import LossKind, LossTerms, LossWeights, vq_losses
 from intermask.vq.model import MotionVQVAE, VQVAEOutput
 from intermask.vq.views import InterHumanView, TwoPersonView, person_view
@@ -154,15 +152,10 @@ class VQVAEModule(L.LightningModule):
             self.log("val/mpjpe_mm", self.val_mpjpe, batch_size=batch_size, prog_bar=True)
 
     def configure_optimizers(self) -> dict[str, Any]:
-        optimizer = self.optimizer_factory(params=self.parameters())
-        schedule = partial(
-            warmup_multistep_factor,
-            total_steps=max(int(self.trainer.estimated_stepping_batches), 1),
+        return warmup_multistep_optimizers(
+            self,
+            self.optimizer_factory,
             warmup_fraction=self.hparams.warmup_fraction,
-            milestones=tuple(self.hparams.lr_milestones),
+            milestones=self.hparams.lr_milestones,
             gamma=self.hparams.lr_gamma,
         )
-        return {
-            "optimizer": optimizer,
-            "lr_scheduler": {"scheduler": LambdaLR(optimizer, schedule), "interval": "step"},
-        }
