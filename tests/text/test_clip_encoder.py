@@ -113,6 +113,8 @@ def test_failed_download_explains_the_offline_route(monkeypatch):
     def offline(*args, **kwargs):
         raise OSError("network is unreachable")
 
+    # open_clip resolves the "openai" tag through this function before it builds the model, so
+    # the test neither downloads nor allocates ViT-L
     monkeypatch.setattr(open_clip.factory, "download_pretrained", offline)
     with pytest.raises(RuntimeError, match="Offline.*text.encoder.pretrained=/path/to/"):
         FrozenCLIPTextEncoder(model_name="ViT-L-14-336", pretrained="openai")
