@@ -60,6 +60,12 @@ def test_train_gen_learns_on_frozen_tokens(synthetic_interhuman_root, vq_checkpo
     vq_before = load_vq(vq_checkpoint).state_dict()
     metrics = train(_gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path))
     assert torch.isfinite(torch.tensor(metrics["val/loss"])) and metrics["val/loss"] > 0
+    # validation decoded a few generated samples and logged their statistics next to the GT's
+    for source in ("generated", "real"):
+        assert 0.0 < metrics[f"val_samples/{source}_root_distance"] < 10.0
+        assert metrics[f"val_samples/{source}_joint_speed"] > 0.0
+    # the GT skeleton is rigid; the decoded one of a barely trained VQ-VAE is not
+    assert metrics["val_samples/real_bone_length_std"] < 1.0
     checkpoint = _last(tmp_path)
     assert checkpoint["global_step"] == 2
     assert all(key.startswith("net.") for key in checkpoint["state_dict"])  # frozen parts stay out

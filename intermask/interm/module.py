@@ -26,12 +26,17 @@ from intermask.interm.masking import (
     training_mask,
 )
 from intermask.interm.model import InterMTransformer, TextFeatures
+from intermask.interm.sampler import (
+    FRAMES_PER_STEP,
+    GeneratedMotion,
+    InteractionSampler,
+    joints_from_features,
+)
+from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
 from intermask.utils.schedules import warmup_multistep_optimizers
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.views import TwoPersonView
-
-FRAMES_PER_STEP = 4  # the VQ-VAE downsamples time by 4 (two stride-2 stages)
 
 
 class InterMLosses(NamedTuple):
@@ -89,6 +94,12 @@ class InterMModule(L.LightningModule):
             warms up for a quarter epoch, i.e. ``0.25 / max_epochs``; the config computes it.
         lr_milestones, lr_gamma: the learning rate is multiplied by ``lr_gamma`` (1/3) at these
             fractions of training (0.5, 0.7, 0.85).
+        validation_samples: every validation generates this many interactions from the first
+            captions of the first batch (fixed seeds) and logs their joint statistics next to
+            the ground truth's (``val_samples/{generated,real}_*``); 0 switches it off.
+        sample_iterations: decoding iterations for those samples (fewer than the paper's 20
+            keeps validation cheap).
+        fps: frame rate of the dataset, for speeds in m/s.
     """
 
     def __init__(
@@ -104,6 +115,9 @@ class InterMModule(L.LightningModule):
         step_unroll: bool = True,
         lr_milestones: Sequence[float] = (0.5, 0.7, 0.85),
         lr_gamma: float = 1 / 3,
+        validation_samples: int = 4,
+        sample_iterations: int = 10,
+        fps: float = 30.0,
     ) -> None:
         super().__init__()
         if isinstance(vq.view, TwoPersonView):
@@ -122,7 +136,13 @@ class InterMModule(L.LightningModule):
                 raise ValueError(f"{name} must lie in [0, 1], got {prob}")
         if not 0.0 <= warmup_fraction < 1.0:
             raise ValueError(f"warmup_fraction must lie in [0, 1), got {warmup_fraction}")
+        if validation_samples < 0 or sample_iterations < 1:
+            raise ValueError(
+                f"validation_samples must be >= 0 and sample_iterations >= 1, got "
+                f"{validation_samples} and {sample_iterations}"
+            )
         self.net = net
+        self.last_samples: tuple[list[str], GeneratedMotion] | None = None
         vq.eval().requires_grad_(False)
         self._frozen = _Frozen(vq=vq, text=text)
         self.optimizer_factory = optimizer
@@ -135,6 +155,9 @@ class InterMModule(L.LightningModule):
                 "warmup_fraction": float(warmup_fraction),
                 "lr_milestones": [float(m) for m in lr_milestones],
                 "lr_gamma": float(lr_gamma),
+                "validation_samples": int(validation_samples),
+                "sample_iterations": int(sample_iterations),
+                "fps": float(fps),
             },
             logger=False,
         )
@@ -172,6 +195,12 @@ class InterMModule(L.LightningModule):
                 for person in range(2)
             ]
         return stack_persons(*tokens), lengths // FRAMES_PER_STEP
+
+    def sampler(self, **settings: Any) -> InteractionSampler:
+        """An :class:`InteractionSampler` over this module's network, VQ-VAE and text cache;
+        ``settings`` are its decoding keyword arguments (iterations, cfg_scale, ...)."""
+        self._move_frozen(self.device)
+        return InteractionSampler(net=self.net, vq=self.vq, text=self.text, **settings)
 
     def encode_text(self, captions: Sequence[str]) -> TextFeatures:
         features = self.text.get_or_encode(list(captions))
@@ -232,6 +261,29 @@ class InterMModule(L.LightningModule):
         with torch.no_grad():
             losses = self.compute_losses(batch, condition_drop=0.0)
         self._log_losses("val", losses, batch["motion"].shape[0])
+        if batch_idx == 0 and self.hparams.validation_samples > 0:
+            self._log_validation_samples(batch)
+
+    def _log_validation_samples(self, batch: dict[str, Any]) -> None:
+        """Generate from the first captions of the batch and log decoded joint statistics of
+        the samples and of their ground truth (same lengths)."""
+        count = min(self.hparams.validation_samples, batch["motion"].shape[0])
+        captions = list(batch["caption"][:count])
+        motion = batch["motion"][:count]
+        frames = motion.shape[2] - motion.shape[2] % FRAMES_PER_STEP
+        lengths = batch["length"][:count].to(self.device).long().clamp(max=frames)
+        lengths = (lengths - lengths % FRAMES_PER_STEP).clamp_min(2 * FRAMES_PER_STEP)
+        generated = self.sampler(iterations=self.hparams.sample_iterations)(
+            captions, lengths, seeds=list(range(count))
+        )
+        self.last_samples = (captions, generated)
+        real = joints_from_features(self.vq, motion[:, :, :frames].float())
+        if generated.joints is None or real is None:
+            return  # a representation without positions (Inter-X without a body model)
+        fps = self.hparams.fps
+        for source, joints in (("generated", generated.joints), ("real", real)):
+            for name, value in interaction_statistics(joints, lengths, fps=fps).items():
+                self.log(f"val_samples/{source}_{name}", value, batch_size=count)
 
     def configure_optimizers(self) -> dict[str, Any]:
         return warmup_multistep_optimizers(

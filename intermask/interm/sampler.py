@@ -1,0 +1,131 @@
+"""From captions to motion: text features -> iterative decoding -> VQ decoding -> joints.
+
+One object that the training module (validation samples), the ``intermask generate`` command and
+the evaluation protocol share, so the three can never decode differently.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import torch
+from einops import rearrange
+
+from intermask.interm.decoding import CFG_SCALE, ITERATIONS, TOP_K_RATIO, Edit, generate
+from intermask.interm.model import InterMTransformer, TextFeatures
+from intermask.text.cache import TextFeatureCache
+from intermask.vq.model import MotionVQVAE
+
+FRAMES_PER_STEP = 4  # the VQ-VAE downsamples time by 4 (two stride-2 stages)
+
+
+class GeneratedMotion(NamedTuple):
+    tokens: torch.Tensor  # (B, 2, rows, T') codes, -1 on padding
+    features: torch.Tensor  # (B, 2, T, *F) de-normalized dataset representation, T = 4 T'
+    joints: torch.Tensor | None  # (B, T, 2, 22, 3) metres, Y-up; None without positions
+    lengths: torch.Tensor  # (B,) frames (multiples of 4); frames beyond are padding
+
+
+def decode_tokens(vq: MotionVQVAE, tokens: torch.Tensor) -> torch.Tensor:
+    """(B, 2, rows, T') codes (-1 on padding) -> (B, 2, 4 T', *F) *normalized* features.
+
+    Both persons go through the single-person decoder as one batch of 2B.
+    """
+    if tokens.ndim != 4 or tokens.shape[1] != 2:
+        raise ValueError(f"tokens must be (B, 2, rows, T'), got {tuple(tokens.shape)}")
+    flat = rearrange(tokens.clamp_min(0), "b p r t -> (b p) 1 r t")
+    features = vq.decode(flat)  # (2B, T, *F)
+    return rearrange(features, "(b p) t ... -> b p t ...", p=2)
+
+
+def joints_from_features(vq: MotionVQVAE, features: torch.Tensor) -> torch.Tensor | None:
+    """(B, 2, T, *F) normalized features -> (B, T, 2, 22, 3) joints through the VQ's view
+    (None when the representation has no positions, e.g. Inter-X without a body model)."""
+    flat = rearrange(features, "b p t ... -> (b p) t ...")
+    positions = vq.view.geometry(flat).positions
+    if positions is None:
+        return None
+    return rearrange(positions, "(b p) t j c -> b t p j c", p=2)
+
+
+class InteractionSampler:
+    """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
+
+    ``iterations``, ``cfg_scale``, ``top_k_ratio`` and ``temperature`` default to the paper's
+    inference settings (section 3.3, appendix C.1).
+    """
+
+    def __init__(
+        self,
+        *,
+        net: InterMTransformer,
+        vq: MotionVQVAE,
+        text: TextFeatureCache,
+        iterations: int = ITERATIONS,
+        cfg_scale: float = CFG_SCALE,
+        top_k_ratio: float = TOP_K_RATIO,
+        temperature: float = 1.0,
+    ) -> None:
+        self.net, self.vq, self.text = net, vq, text
+        self.iterations, self.cfg_scale = iterations, cfg_scale
+        self.top_k_ratio, self.temperature = top_k_ratio, temperature
+
+    @property
+    def device(self) -> torch.device:
+        return next(self.net.parameters()).device
+
+    def text_features(self, captions: Sequence[str]) -> TextFeatures:
+        features = self.text.get_or_encode(list(captions))
+        return TextFeatures(*(t.to(self.device) for t in features))
+
+    def tokenize(self, motion: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        """(B, 2, T, *F) normalized features, (B,) frames -> (B, 2, rows, T/4) base-layer codes
+        (-1 beyond ``lengths // 4``), for reaction and inpainting inputs."""
+        tokens = [self.vq.encode(motion[:, person], lengths)[:, 0] for person in range(2)]
+        return torch.stack(tokens, dim=1)
+
+    @torch.no_grad()
+    def __call__(
+        self,
+        captions: Sequence[str] | None,
+        lengths: torch.Tensor,
+        *,
+        seeds: Sequence[int] | torch.Tensor | None = None,
+        reference_tokens: torch.Tensor | None = None,
+        edit: Edit | None = None,
+        iterations: int | None = None,
+    ) -> GeneratedMotion:
+        """Generate B interactions.
+
+        captions: B texts, or None for the null condition (reaction without text).
+        lengths: (B,) frames; rounded down to a multiple of 4 (at least 4).
+        seeds: (B,) one per sample (reproducible and independent of the batch).
+        reference_tokens / edit: reaction (person A fixed) and inpainting, see :func:`generate`.
+        """
+        lengths = torch.as_tensor(lengths, device=self.device).long()
+        if lengths.ndim != 1 or bool((lengths < FRAMES_PER_STEP).any()):
+            raise ValueError(
+                f"lengths must be (B,) frames >= {FRAMES_PER_STEP}, got {lengths.tolist()}"
+            )
+        if captions is not None and len(captions) != lengths.shape[0]:
+            raise ValueError(f"got {len(captions)} captions for {lengths.shape[0]} lengths")
+        steps = lengths // FRAMES_PER_STEP
+        text = None if captions is None else self.text_features(captions)
+        tokens = generate(
+            self.net,
+            text,
+            steps,
+            iterations=iterations or self.iterations,
+            cfg_scale=self.cfg_scale,
+            top_k_ratio=self.top_k_ratio,
+            temperature=self.temperature,
+            seeds=seeds,
+            reference_tokens=reference_tokens,
+            edit=edit,
+        )
+        normalized = decode_tokens(self.vq, tokens)
+        joints = joints_from_features(self.vq, normalized)
+        flat = rearrange(normalized, "b p t ... -> (b p) t ...")
+        features = rearrange(self.vq.view.denormalize(flat), "(b p) t ... -> b p t ...", p=2)
+        return GeneratedMotion(tokens, features, joints, steps * FRAMES_PER_STEP)
