@@ -1,0 +1,189 @@
+"""The replication protocol on a fake split and evaluator whose embeddings are known exactly."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from intermask.metrics.protocol import (
+    MotionSource,
+    ProtocolConstants,
+    ProtocolRunner,
+    Summary,
+    repeat_items,
+    sample_seeds,
+)
+from intermask.metrics.report import format_summary, markdown_table, write_results
+
+ITEMS, FRAMES, DIM = 48, 8, 6
+
+
+def _split() -> dict:
+    generator = torch.Generator().manual_seed(0)
+    return {
+        "motion": torch.randn(ITEMS, 2, FRAMES, DIM, generator=generator),
+        "length": torch.full((ITEMS,), FRAMES),
+        "caption": [f"item {i}" for i in range(ITEMS)],
+    }
+
+
+class Loader:
+    """Shuffled, drop_last eval batches; the order depends on the epoch only."""
+
+    def __init__(self, split: dict, batch_size: int):
+        self.split, self.batch_size = split, batch_size
+
+    def __call__(self, epoch: int):
+        order = torch.randperm(ITEMS, generator=torch.Generator().manual_seed(epoch))
+        for start in range(0, ITEMS - self.batch_size + 1, self.batch_size):
+            yield repeat_items(self.split, order[start : start + self.batch_size], 1)
+
+
+class ExactEvaluator:
+    """Motion embedding = flattened motion; text "item i" embeds to item i's GT motion."""
+
+    name, file_hash = "exact", "0" * 16
+
+    def __init__(self, split: dict):
+        self.table = {
+            c: m.flatten() for c, m in zip(split["caption"], split["motion"], strict=True)
+        }
+
+    def encode_motion(self, motion, lengths):
+        return motion.flatten(1)
+
+    def encode_text(self, captions, tokens=None):
+        return torch.stack([self.table[c] for c in captions])
+
+
+class Truth(MotionSource):
+    name = "Ground Truth"
+
+    def __call__(self, batch, seeds):
+        return batch["motion"], batch["length"]
+
+
+class Noise(MotionSource):
+    """A 'generator' whose sample depends only on its seed."""
+
+    name, generates = "Noise", True
+
+    def __call__(self, batch, seeds):
+        motion = torch.stack(
+            [
+                torch.randn(2, FRAMES, DIM, generator=torch.Generator().manual_seed(int(s)))
+                for s in seeds
+            ]
+        )
+        return motion, batch["length"]
+
+
+class Copy(Truth):
+    """A 'generator' that returns the GT whatever the seed: MultiModality 0."""
+
+    name, generates = "Copy", True
+
+
+def _runner(sources, **constants) -> ProtocolRunner:
+    split = _split()
+    settings = dict(
+        eval_batch_size=8,
+        replications=3,
+        diversity_pairs=20,
+        mm_texts=4,
+        mm_generations=6,
+        mm_pairs=3,
+        emb_scale=1.0,
+        divide_by=1.0,
+        mm_scale=1.0,
+    )
+    settings.update(constants)
+    c = ProtocolConstants(**settings)
+    return ProtocolRunner(
+        loader=Loader(split, c.eval_batch_size),
+        evaluator=ExactEvaluator(split),
+        ground_truth=Truth(),
+        sources=sources,
+        constants=c,
+        generation_batch_size=12,
+    )
+
+
+def test_ground_truth_row_is_exact_and_noise_is_at_chance():
+    result = _runner([Truth(), Noise(), Copy()]).run({"dataset": "fake", "mode": "interaction"})
+    truth, noise, copy = (result.rows[name] for name in ("Ground Truth", "Noise", "Copy"))
+    for k in (1, 2, 3):
+        assert truth[f"top{k}"].mean == 1.0 and truth[f"top{k}"].ci95 == 0.0
+    assert truth["mm_dist"].mean == pytest.approx(0.0, abs=1e-6)
+    # the two passes hold the same 48 items in another order: identical embedding statistics
+    assert truth["fid"].mean == pytest.approx(0.0, abs=1e-4)  # singular covariances
+    assert noise["fid"].mean > 1.0 and noise["top3"].mean < 0.75
+    assert "multimodality" not in truth
+    assert noise["multimodality"].mean > 1.0 and copy["multimodality"].mean == pytest.approx(0.0)
+    assert len(noise["top1"].values) == 3
+
+
+def test_rows_are_reproducible_and_replications_differ():
+    first = _runner([Truth(), Noise()]).run({})
+    second = _runner([Truth(), Noise()]).run({})
+    assert first.rows["Noise"]["fid"].values == second.rows["Noise"]["fid"].values
+    assert len(set(first.rows["Noise"]["fid"].values)) == 3  # fresh seeds every replication
+
+
+def test_multimodality_respects_its_replication_count_and_switch():
+    result = _runner([Noise()], mm_replications=1).run({})
+    assert len(result.rows["Noise"]["multimodality"].values) == 1
+    fast = _runner([Noise()])
+    fast.multimodality = False
+    assert "multimodality" not in fast.run({}).rows["Noise"]
+
+
+def test_summary_is_mean_and_ci95_with_population_std():
+    values = [0.3, 0.5, 0.4, 0.45]
+    summary = Summary.of(values)
+    assert summary.mean == pytest.approx(np.mean(values))
+    assert summary.ci95 == pytest.approx(1.96 * np.std(values) / math.sqrt(4))
+    assert format_summary(Summary(0.44912, 0.0041, [])) == "0.449±.004"
+    assert format_summary(Summary(5.154, 1.234, [])) == "5.154±1.234"
+
+
+def test_seeds_are_distinct_per_sample_stream_and_replication():
+    c = ProtocolConstants()
+    seeds = torch.cat(
+        [sample_seeds(c, r, s, 50, o) for r in range(3) for s in range(2) for o in (0, 50)]
+    )
+    assert seeds.unique().numel() == seeds.numel()
+
+
+def test_empty_split_and_duplicate_rows_are_errors():
+    with pytest.raises(ValueError, match="gave no batch of 96 items"):
+        _runner([Truth()], eval_batch_size=96).run({})
+    with pytest.raises(ValueError, match="row names must be unique"):
+        _runner([Truth(), Truth()])
+    with pytest.raises(ValueError, match=r"mm_generations \(2\) must be >= mm_pairs \(3\)"):
+        ProtocolConstants(mm_generations=2, mm_pairs=3)
+
+
+def test_results_are_written_as_json_and_a_paper_style_table(tmp_path):
+    result = _runner([Truth(), Noise()], replications=2).run(
+        {
+            "dataset": "fake",
+            "split": "test",
+            "mode": "interaction",
+            "replications": 2,
+            "evaluator": "exact (0000)",
+            "fast": True,
+        }
+    )
+    json_path, markdown_path = write_results(result, tmp_path)
+    table = markdown_path.read_text()
+    assert (
+        "FAST MODE" in table and "| Ground Truth | 1.000±.000 | 1.000±.000 | 1.000±.000 |" in table
+    )
+    assert "R-Prec Top 1 ↑" in table and "MModality ↑" in table and "MPJPE" not in table
+    assert "eval_batch_size=8" in table and "evaluator**: exact (0000)" in table
+    assert '"Noise"' in json_path.read_text()
+    assert markdown_table(result) == table
