@@ -1,12 +1,14 @@
 """The ``intermask`` console script.
 
-``intermask data synth|check|stats|item`` work on dataset folders. Heavy imports happen inside
-the sub-commands so that ``intermask --help`` answers at once.
+``intermask data synth|check|stats|item`` work on dataset folders; ``intermask generate`` turns
+captions (and optionally a reference or an edited motion) into interactions. Heavy imports happen
+inside the sub-commands so that ``intermask --help`` answers at once.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from collections.abc import Sequence
@@ -91,6 +93,120 @@ def _data_item(args: argparse.Namespace) -> int:
     return 0
 
 
+def _frame_range(text: str) -> tuple[int, int]:
+    match = re.fullmatch(r"(\d+):(\d+)", text)
+    if not match:
+        raise argparse.ArgumentTypeError(f"expected frames as A:B (e.g. 40:80), got {text!r}")
+    return int(match[1]), int(match[2])
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from intermask import generate as gen
+    from intermask.interm.load import load_generator
+
+    defaults = gen.default_settings()
+    if bool(args.text) == bool(args.prompts) and not args.reaction:
+        raise ValueError("give captions with --text or --prompts (one of them)")
+    captions: list[str | None] = list(args.text or [])
+    if args.prompts:
+        captions = gen.read_prompts(args.prompts)
+    if not captions:
+        captions = [None]  # reaction without text
+    if (args.edit is None) != (args.frames_range is None):
+        raise ValueError("--edit FILE needs --frames A:B (and --frames A:B needs --edit)")
+    if args.reaction and args.edit:
+        raise ValueError("--reaction and --edit are exclusive")
+    generator = load_generator(args.checkpoint, vq_checkpoint=args.vq_checkpoint)
+    kind = gen.dataset_kind(generator)
+    fps = args.fps or defaults["fps"]
+    mode_iterations = defaults["reaction_iterations"] if args.reaction else defaults["iterations"]
+    settings = gen.Settings(
+        iterations=args.iterations or mode_iterations,
+        cfg_scale=defaults["cfg_scale"] if args.cfg_scale is None else args.cfg_scale,
+        top_k_ratio=args.top_k or defaults["top_k_ratio"],
+        temperature=defaults["temperature"] if args.temperature is None else args.temperature,
+        batch_size=args.batch_size or defaults["batch_size"],
+        fps=fps,
+    )
+    reaction = edit = None
+    frames = 0
+    if args.reaction:
+        reaction = gen.load_motion_file(args.reaction, generator)[0]
+    elif args.edit:
+        motion = gen.load_motion_file(args.edit, generator)
+        if motion.shape[0] != 2:
+            raise ValueError(f"{args.edit}: editing needs both persons, (2, T, ...) features")
+        region = gen.edit_region(
+            motion.shape[1] // 4, args.frames_range, args.person, generator.net.rows
+        )
+        edit = (motion, region)
+    else:
+        seconds = args.seconds if args.length_frames is None else None
+        if seconds is None and args.length_frames is None:
+            seconds = defaults["seconds"]
+        frames = gen.frames_from(
+            seconds=seconds, frames=args.length_frames, fps=fps, max_frames=gen.MAX_FRAMES[kind]
+        )
+    start = time.perf_counter()
+    samples = gen.generate_samples(
+        generator,
+        captions,
+        frames=frames,
+        samples=args.samples or defaults["samples"],
+        seed=defaults["seed"] if args.seed is None else args.seed,
+        settings=settings,
+        reaction=reaction,
+        edit=edit,
+        progress=True,
+    )
+    out = Path(args.out or defaults["out"])
+    renders = [] if args.no_render else list(defaults["renders"])
+    for sample in samples:
+        directory = out / f"{gen.slug(sample.caption)}_{sample.index:02d}"
+        paths = gen.write_sample(
+            sample, directory, generator=generator, settings=settings, renders=renders
+        )
+        frames_out = sample.features.shape[1]
+        print(
+            f"{directory}: {sample.mode}, {frames_out} frames ({frames_out / fps:.1f} s), seed "
+            f"{sample.seed}, {sample.caption or '(no text)'!r} -> {', '.join(sorted(paths))}"
+        )
+    print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
+    return 0
+
+
+def _add_generate_parser(commands) -> None:
+    parser = commands.add_parser(
+        "generate",
+        help="captions -> two-person interactions (npy, JSON, GIF, MP4, HTML)",
+        description="Defaults come from configs/generate.yaml.",
+    )
+    parser.add_argument("--checkpoint", required=True, help="train_gen run directory or .ckpt")
+    parser.add_argument("--vq-checkpoint", help="override the run's VQ checkpoint path")
+    parser.add_argument("--text", action="append", help="a caption (repeat for several)")
+    parser.add_argument("--prompts", help="file with one caption per line")
+    length = parser.add_mutually_exclusive_group()
+    length.add_argument("--seconds", type=float, help="length in seconds (default 4)")
+    length.add_argument("--length-frames", type=int, help="length in frames")
+    parser.add_argument("--samples", type=int, help="samples per caption (default 1)")
+    parser.add_argument("--seed", type=int, help="first seed (default 0)")
+    parser.add_argument("--cfg-scale", type=float, help="classifier-free guidance scale (2)")
+    parser.add_argument("--iterations", type=int, help="decoding iterations (20; reaction 10)")
+    parser.add_argument("--top-k", type=float, help="top-k ratio of codes kept (0.1)")
+    parser.add_argument("--temperature", type=float, help="sampling temperature (1)")
+    parser.add_argument("--batch-size", type=int, help="samples per forward batch (32)")
+    parser.add_argument("--fps", type=float, help="frame rate of the dataset (30)")
+    parser.add_argument("--reaction", help="reference person's motion: person 1 stays fixed")
+    parser.add_argument("--edit", help="two-person motion to edit (needs --frames)")
+    parser.add_argument(
+        "--frames", dest="frames_range", type=_frame_range, help="edited frames A:B"
+    )
+    parser.add_argument("--person", type=int, choices=(1, 2), help="edit one person only")
+    parser.add_argument("--out", help="output folder (default outputs/generate)")
+    parser.add_argument("--no-render", action="store_true", help="write arrays and JSON only")
+    parser.set_defaults(run=_generate)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="intermask", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -135,6 +251,8 @@ def build_parser() -> argparse.ArgumentParser:
     item.add_argument("--id", required=True, help="clip id (file stem / sample name)")
     item.add_argument("--out", required=True, help="output .npz path")
     item.set_defaults(run=_data_item)
+
+    _add_generate_parser(commands)
     return parser
 
 

@@ -1,0 +1,156 @@
+"""Run the evaluation protocol: ``python -m intermask.evaluate [mode=...] gen_ckpt=... eval_ckpt=...``.
+
+Thin by design: build the rows of the table for the chosen mode, run
+:class:`~intermask.metrics.protocol.ProtocolRunner`, write JSON + Markdown, log to TensorBoard and
+print the table. ``make eval`` wraps it.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import hydra
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from intermask.metrics.protocol import MotionSource, ProtocolConstants, ProtocolRunner
+from intermask.metrics.report import markdown_table, write_results
+from intermask.metrics.sources import (
+    GroundTruth,
+    InterMaskGeneration,
+    InterMaskReaction,
+    VQReconstruction,
+)
+from intermask.train import CONFIG_DIR
+from intermask.utils.files import file_hash
+from intermask.utils.run_record import write_run_record
+
+log = logging.getLogger(__name__)
+MODES = ("interaction", "reaction", "reconstruction")
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def _on(batch: dict[str, Any], device: torch.device) -> dict[str, Any]:
+    return {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in batch.items()}
+
+
+def build_sources(
+    cfg: DictConfig, normalizer, device: torch.device
+) -> tuple[list[MotionSource], dict[str, str]]:
+    """The rows after the GT row for ``cfg.mode`` -> (sources, {checkpoint role: 'path (hash)'})."""
+    from intermask.interm.load import load_generator
+    from intermask.interm.sampler import InteractionSampler
+    from intermask.vq.load import load_vq
+
+    checkpoints: dict[str, str] = {}
+    if cfg.mode == "reconstruction":
+        if not cfg.vq_ckpt:
+            raise ValueError("mode=reconstruction needs vq_ckpt=<train_vq run>/checkpoints/*.ckpt")
+        checkpoints["vq"] = f"{cfg.vq_ckpt} ({file_hash(cfg.vq_ckpt)})"
+        return [VQReconstruction(vq=load_vq(cfg.vq_ckpt).to(device))], checkpoints
+    if not cfg.gen_ckpt:
+        raise ValueError(f"mode={cfg.mode} needs gen_ckpt=<train_gen run or .ckpt>")
+    generator = load_generator(cfg.gen_ckpt, vq_checkpoint=cfg.vq_ckpt or None)
+    checkpoints["generator"] = f"{generator.checkpoint} ({file_hash(generator.checkpoint)})"
+    checkpoints["vq"] = f"{generator.vq_checkpoint} ({file_hash(generator.vq_checkpoint)})"
+    checkpoints["text_encoder"] = generator.text.encoder.extra_repr()
+    sampler = InteractionSampler(
+        net=generator.net.to(device),
+        vq=generator.vq.to(device),
+        text=generator.text,
+        **OmegaConf.to_container(cfg.sampler),
+    )
+    generator.text.encoder.to(device)
+    if cfg.mode == "interaction":
+        return [InterMaskGeneration(sampler=sampler)], checkpoints
+    reaction = InterMaskReaction(
+        sampler=sampler,
+        normalizer=normalizer,
+        iterations=cfg.reaction.iterations,
+        use_text=cfg.reaction.use_text,
+    )
+    return [reaction], checkpoints
+
+
+def evaluate(cfg: DictConfig) -> dict[str, Any]:
+    """Run the protocol of ``cfg`` -> the result dictionary (also written to the run folder)."""
+    if cfg.mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {cfg.mode!r}")
+    output_dir = Path(cfg.paths.output_dir)
+    write_run_record(output_dir, cfg, extra={"job": cfg.task_name})
+    constants: ProtocolConstants = instantiate(cfg.protocol)
+    replications = cfg.fast_replications if cfg.fast else constants.replications
+    constants = ProtocolConstants(**{**vars(constants), "replications": replications})
+    device = pick_device(cfg.device)
+    datamodule = instantiate(
+        cfg.data, mode="interaction", eval_batch_size=constants.eval_batch_size
+    )
+    datamodule.prepare_data()
+    datamodule.setup("test" if cfg.split == "test" else "validate")
+    from intermask.evaluator import load_evaluator
+
+    evaluator = load_evaluator(cfg.eval_ckpt).to(device)
+    sources, checkpoints = build_sources(cfg, datamodule.normalizer, device)
+
+    def loader(epoch: int) -> Iterator[dict[str, Any]]:
+        for batch in datamodule.eval_dataloader(cfg.split, epoch=epoch):
+            yield _on(batch, device)
+
+    runner = ProtocolRunner(
+        loader=loader,
+        evaluator=evaluator,
+        ground_truth=GroundTruth(normalizer=datamodule.normalizer),
+        sources=[GroundTruth(normalizer=datamodule.normalizer), *sources],
+        constants=constants,
+        multimodality=not cfg.fast,
+        generation_batch_size=cfg.generation_batch_size,
+        progress=lambda message: log.info("%s", message),
+    )
+    header = {
+        "mode": cfg.mode,
+        "dataset": f"{cfg.data.dataset} ({cfg.data.root})",
+        "split": cfg.split,
+        "replications": replications,
+        "fast": bool(cfg.fast),
+        "evaluator": f"{evaluator.name} ({cfg.eval_ckpt}, sha256 {evaluator.file_hash})",
+        **checkpoints,
+        "sampler": dict(OmegaConf.to_container(cfg.sampler)),
+        "device": str(device),
+    }
+    result = runner.run(header)
+    json_path, markdown_path = write_results(result, output_dir)
+    _log_tensorboard(result, output_dir / "tensorboard")
+    print(markdown_table(result))
+    print(f"results: {json_path} and {markdown_path}")
+    return result.to_dict()
+
+
+def _log_tensorboard(result, directory: Path) -> None:
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(directory))
+    mode = result.header.get("mode", "eval")
+    for row, metrics in result.rows.items():
+        for name, summary in metrics.items():
+            writer.add_scalar(f"{mode}/{row}/{name}", summary.mean, 0)
+            writer.add_scalar(f"{mode}/{row}/{name}_ci95", summary.ci95, 0)
+    writer.add_text(f"{mode}/table", markdown_table(result), 0)
+    writer.close()
+
+
+@hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="eval")
+def main(cfg: DictConfig) -> None:
+    evaluate(cfg)
+
+
+if __name__ == "__main__":
+    main()

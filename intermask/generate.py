@@ -1,0 +1,282 @@
+"""Text (and optionally a reference or an edited motion) to two-person interactions on disk.
+
+``intermask generate --text "two people shake hands" --seconds 4 --samples 2`` loads a train_gen
+run, generates every (caption, sample) pair in batches, and writes per sample: ``joints.npy``
+(T, 2, 22, 3) metres Y-up, ``features.npy`` (2, T, *F) in the dataset representation
+(de-normalized), ``sample.json`` (caption, settings, seed, checkpoint hashes) and the renderings.
+Defaults live in ``configs/generate.yaml``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from omegaconf import OmegaConf
+
+from intermask.interm.decoding import Edit
+from intermask.interm.load import LoadedGenerator
+from intermask.interm.sampler import FRAMES_PER_STEP, InteractionSampler
+from intermask.utils.files import file_hash
+
+CONFIG_PATH = Path(__file__).resolve().parents[1] / "configs" / "generate.yaml"
+MAX_FRAMES = {"interhuman": 300, "interx": 148}  # longest training clips (multiples of 4)
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Decoding settings of one generation job (paper defaults in configs/generate.yaml)."""
+
+    iterations: int = 20
+    cfg_scale: float = 2.0
+    top_k_ratio: float = 0.1
+    temperature: float = 1.0
+    batch_size: int = 32
+    fps: float = 30.0
+
+
+@dataclass
+class Sample:
+    caption: str | None
+    index: int  # sample number of this caption
+    seed: int
+    joints: np.ndarray | None  # (T, 2, 22, 3)
+    features: np.ndarray  # (2, T, *F)
+    mode: str  # "interaction" | "reaction" | "edit"
+
+
+def default_settings() -> dict[str, Any]:
+    return OmegaConf.to_container(OmegaConf.load(CONFIG_PATH), resolve=True)
+
+
+def dataset_kind(generator: LoadedGenerator) -> str:
+    return str(generator.config.data.dataset)
+
+
+def frames_from(*, seconds: float | None, frames: int | None, fps: float, max_frames: int) -> int:
+    """Requested length -> frames rounded down to a multiple of 4; errors outside the range
+    the generator was trained on."""
+    if (seconds is None) == (frames is None):
+        raise ValueError("give the length either in seconds or in frames (exactly one)")
+    requested = int(round(seconds * fps)) if seconds is not None else int(frames)
+    rounded = requested - requested % FRAMES_PER_STEP
+    if not 2 * FRAMES_PER_STEP <= rounded <= max_frames:
+        raise ValueError(
+            f"length {requested} frames is out of range: the generator makes "
+            f"{2 * FRAMES_PER_STEP}..{max_frames} frames ({max_frames / fps:.1f} s at {fps:g} fps)"
+        )
+    return rounded
+
+
+def read_prompts(path: str | Path) -> list[str]:
+    """One caption per non-empty line."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: prompts file not found")
+    prompts = [line.strip() for line in path.read_text().splitlines() if line.strip()]
+    if not prompts:
+        raise ValueError(f"{path}: no prompt in the file (one caption per line expected)")
+    return prompts
+
+
+def normalize(generator: LoadedGenerator, features: torch.Tensor) -> torch.Tensor:
+    """De-normalized (..., T, *F) -> the VQ's normalized space (identity without statistics)."""
+    view = generator.vq.view
+    if hasattr(view, "std"):
+        return (features - view.mean) / view.std
+    return features
+
+
+def load_motion_file(path: str | Path, generator: LoadedGenerator) -> torch.Tensor:
+    """A motion file -> (P, T, *F) de-normalized features (P = 1 or 2), T a multiple of 4.
+
+    Accepted: ``.npy`` of dataset features, (T, *F) for one person or (2, T, *F) for both;
+    for InterHuman also an official ``person1/<id>.npy`` (T, 492) raw file, whose
+    ``person2/<id>.npy`` sibling is read too and both are converted to 262-d features.
+    """
+    from intermask.motion import interhuman as ih
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: motion file not found")
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (ValueError, OSError) as error:
+        raise ValueError(f"{path}: not a readable .npy motion file ({error})") from error
+    feature_shape = tuple(generator.vq.view.feature_shape)
+    motion = torch.as_tensor(array, dtype=torch.float32)
+    if dataset_kind(generator) == "interhuman" and motion.ndim == 2 and motion.shape[1] == 492:
+        partner = path.parent.parent / "person2" / path.name
+        if path.parent.name != "person1" or not partner.is_file():
+            raise ValueError(
+                f"{path}: a raw (T, 492) InterHuman file must be person1/<id>.npy with its "
+                f"person2/<id>.npy beside it; {partner} not found"
+            )
+        other = torch.as_tensor(np.load(partner), dtype=torch.float32)
+        motion = ih.interaction_features(torch.stack([motion, other], dim=1)).transpose(0, 1)
+    elif tuple(motion.shape[-len(feature_shape) :]) == feature_shape and motion.ndim in (
+        1 + len(feature_shape),
+        2 + len(feature_shape),
+    ):
+        motion = motion if motion.ndim == 2 + len(feature_shape) else motion[None]
+    else:
+        raise ValueError(
+            f"{path}: expected features (T, {feature_shape}) or (2, T, {feature_shape})"
+            f"{' or a raw (T, 492) person1 file' if len(feature_shape) == 1 else ''}, "
+            f"got shape {tuple(motion.shape)}"
+        )
+    if motion.shape[0] > 2 or not bool(torch.isfinite(motion).all()):
+        raise ValueError(f"{path}: at most 2 persons of finite values expected")
+    frames = motion.shape[1] - motion.shape[1] % FRAMES_PER_STEP
+    if frames < 2 * FRAMES_PER_STEP:
+        raise ValueError(f"{path}: {motion.shape[1]} frames is too short (at least 8 needed)")
+    return motion[:, :frames]
+
+
+def edit_region(steps: int, frames: tuple[int, int], person: int | None, rows: int) -> torch.Tensor:
+    """(2, rows, T') bool: the token steps covering frames [A, B) of one person (1 or 2) or both."""
+    start, stop = frames
+    if not 0 <= start < stop <= steps * FRAMES_PER_STEP:
+        raise ValueError(
+            f"edit frames {start}:{stop} must satisfy 0 <= A < B <= {steps * FRAMES_PER_STEP}"
+        )
+    region = torch.zeros(2, rows, steps, dtype=torch.bool)
+    persons = [0, 1] if person is None else [person - 1]
+    region[persons, :, start // FRAMES_PER_STEP : -(-stop // FRAMES_PER_STEP)] = True
+    return region
+
+
+def generate_samples(
+    generator: LoadedGenerator,
+    captions: Sequence[str | None],
+    *,
+    frames: int,
+    samples: int,
+    seed: int,
+    settings: Settings,
+    reaction: torch.Tensor | None = None,
+    edit: tuple[torch.Tensor, torch.Tensor] | None = None,
+    progress: bool = False,
+) -> list[Sample]:
+    """Every caption x ``samples`` in batches of ``settings.batch_size``; sample k of caption c
+    uses seed ``seed + c * samples + k``.
+
+    reaction: (T, *F) de-normalized features of the reference person (person 1 is fixed).
+    edit: ((2, T, *F) de-normalized motion, (2, rows, T/4) region to regenerate).
+    """
+    sampler = InteractionSampler(
+        net=generator.net,
+        vq=generator.vq,
+        text=generator.text,
+        iterations=settings.iterations,
+        cfg_scale=settings.cfg_scale,
+        top_k_ratio=settings.top_k_ratio,
+        temperature=settings.temperature,
+    )
+    jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
+    fixed_tokens = None
+    if reaction is not None or edit is not None:
+        source = reaction[None] if reaction is not None else edit[0]
+        frames = source.shape[1]
+        motion = normalize(generator, source)
+        lengths = torch.full((motion.shape[0],), frames)
+        fixed_tokens = torch.stack(
+            [generator.vq.encode(m[None], lengths[:1])[0, 0] for m in motion]
+        )
+    mode = "reaction" if reaction is not None else "edit" if edit is not None else "interaction"
+    results: list[Sample] = []
+    chunks = range(0, len(jobs), settings.batch_size)
+    for start in _progress(chunks, enabled=progress, total=len(chunks)):
+        chunk = jobs[start : start + settings.batch_size]
+        texts = [captions[c] for c, _ in chunk]
+        seeds = [seed + c * samples + k for c, k in chunk]
+        lengths = torch.full((len(chunk),), frames)
+        kwargs: dict[str, Any] = {}
+        if mode == "reaction":
+            kwargs["reference_tokens"] = fixed_tokens[0][None].expand(len(chunk), -1, -1)
+        elif mode == "edit":
+            tokens = fixed_tokens[None].expand(len(chunk), -1, -1, -1)
+            kwargs["edit"] = Edit(tokens, edit[1][None].expand_as(tokens))
+        use_text = None if all(t is None for t in texts) else [t or "" for t in texts]
+        out = sampler(use_text, lengths, seeds=seeds, **kwargs)
+        for i, (c, k) in enumerate(chunk):
+            joints = None if out.joints is None else out.joints[i].cpu().numpy()
+            results.append(
+                Sample(captions[c], k, seeds[i], joints, out.features[i].cpu().numpy(), mode)
+            )
+    return results
+
+
+def _progress(iterable, *, enabled: bool, total: int):
+    if not enabled or total < 2:
+        return iterable
+    from rich.progress import track
+
+    return track(iterable, description="generating", total=total)
+
+
+def slug(text: str | None, limit: int = 40) -> str:
+    cleaned = re.sub(r"[^a-z0-9]+", "_", (text or "no_text").lower()).strip("_")
+    return cleaned[:limit] or "sample"
+
+
+def write_sample(
+    sample: Sample,
+    directory: Path,
+    *,
+    generator: LoadedGenerator,
+    settings: Settings,
+    renders: Sequence[str],
+) -> dict[str, Path]:
+    """Write the arrays, the JSON record and the requested renders -> {kind: path}."""
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = {"features": directory / "features.npy", "json": directory / "sample.json"}
+    np.save(paths["features"], sample.features.astype(np.float32))
+    if sample.joints is not None:
+        paths["joints"] = directory / "joints.npy"
+        np.save(paths["joints"], sample.joints.astype(np.float32))
+    record = {
+        "caption": sample.caption,
+        "mode": sample.mode,
+        "sample": sample.index,
+        "seed": sample.seed,
+        "frames": int(sample.features.shape[1]),
+        "settings": asdict(settings),
+        "generator": {"path": str(generator.checkpoint), "sha256": file_hash(generator.checkpoint)},
+        "vq": {"path": str(generator.vq_checkpoint), "sha256": file_hash(generator.vq_checkpoint)},
+        "text_encoder": generator.text.encoder.extra_repr(),
+    }
+    paths["json"].write_text(json.dumps(record, indent=2) + "\n")
+    if sample.joints is not None and renders:
+        paths |= render_sample(sample, directory, fps=settings.fps, renders=renders)
+    return paths
+
+
+def render_sample(
+    sample: Sample, directory: Path, *, fps: float, renders: Sequence[str]
+) -> dict[str, Path]:
+    """GIF / MP4 / HTML of one sample; the fixed person of a reaction is drawn as reference."""
+    from intermask.render import ViewerSample, save_gif, save_mp4, write_html_viewer
+
+    reference = 0 if sample.mode == "reaction" else None
+    caption = sample.caption or "(no text)"
+    paths: dict[str, Path] = {}
+    if "gif" in renders:
+        paths["gif"] = directory / "animation.gif"
+        save_gif(sample.joints, paths["gif"], fps=fps, caption=caption, reference_person=reference)
+    if "mp4" in renders:
+        paths["mp4"] = directory / "animation.mp4"
+        save_mp4(sample.joints, paths["mp4"], fps=fps, caption=caption, reference_person=reference)
+    if "html" in renders:
+        paths["html"] = directory / "viewer.html"
+        write_html_viewer(
+            [ViewerSample(name=directory.name, caption=caption, joints=sample.joints, fps=fps)],
+            paths["html"],
+        )
+    return paths

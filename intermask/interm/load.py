@@ -1,0 +1,64 @@
+"""Rebuild a trained generator (Inter-M + its frozen VQ-VAE + text encoder) from a train_gen run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NamedTuple
+
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from intermask.interm.model import InterMTransformer
+from intermask.text.cache import TextFeatureCache
+from intermask.utils.files import resolve_checkpoint
+from intermask.vq.load import load_vq
+from intermask.vq.model import MotionVQVAE
+
+
+class LoadedGenerator(NamedTuple):
+    net: InterMTransformer  # eval mode, frozen
+    vq: MotionVQVAE  # eval mode, frozen
+    text: TextFeatureCache
+    checkpoint: Path  # the Inter-M checkpoint
+    vq_checkpoint: Path
+    config: DictConfig  # the run's resolved config
+
+
+def load_generator(
+    checkpoint: str | Path,
+    *,
+    vq_checkpoint: str | Path | None = None,
+    map_location: str = "cpu",
+) -> LoadedGenerator:
+    """checkpoint: ``<run>/checkpoints/<name>.ckpt`` of a train_gen run, or the run directory
+    (its last.ckpt). The transformer is rebuilt from ``<run>/config.yaml`` and loaded strictly;
+    the VQ-VAE comes from the run's ``vq_ckpt`` unless ``vq_checkpoint`` overrides it."""
+    checkpoint = resolve_checkpoint(checkpoint, kind="generator")
+    config_path = checkpoint.parent.parent / "config.yaml"
+    if not config_path.is_file():
+        raise FileNotFoundError(
+            f"{config_path}: the run config of the generator checkpoint is missing "
+            f"(expected <run>/config.yaml beside <run>/checkpoints/)"
+        )
+    config = OmegaConf.load(config_path)
+    if "vq_ckpt" not in config or "net" not in config.get("model", {}):
+        raise ValueError(f"{config_path}: not a train_gen run config (no vq_ckpt / model.net)")
+    vq_path = Path(vq_checkpoint or config.vq_ckpt)
+    if not vq_path.is_file():
+        raise FileNotFoundError(
+            f"{vq_path}: the generator's VQ checkpoint (from {config_path}) is missing; pass "
+            "vq_checkpoint= to point to it"
+        )
+    net = instantiate(config.model.net)
+    state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
+    net.load_state_dict({k.removeprefix("net."): v for k, v in state.items()})
+    text = instantiate(config.text)
+    return LoadedGenerator(
+        net.eval().requires_grad_(False),
+        load_vq(vq_path, map_location=map_location),
+        text,
+        checkpoint,
+        vq_path,
+        config,
+    )

@@ -1,0 +1,85 @@
+"""Input handling of `intermask generate` that needs no trained checkpoint."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+from intermask import generate as gen
+from intermask.cli import main
+from intermask.vq.views import InterHumanView
+
+
+def test_lengths_round_down_to_token_steps_and_stay_in_range():
+    assert gen.frames_from(seconds=4.0, frames=None, fps=30, max_frames=300) == 120
+    assert gen.frames_from(seconds=None, frames=123, fps=30, max_frames=300) == 120
+    with pytest.raises(ValueError, match=r"length 330 frames is out of range: .*8\.\.300 frames"):
+        gen.frames_from(seconds=11.0, frames=None, fps=30, max_frames=300)
+    with pytest.raises(ValueError, match="either in seconds or in frames"):
+        gen.frames_from(seconds=1.0, frames=30, fps=30, max_frames=300)
+
+
+def test_edit_region_covers_the_token_steps_of_the_frames():
+    region = gen.edit_region(10, (6, 17), person=2, rows=5)
+    assert region.shape == (2, 5, 10)
+    assert not region[0].any()
+    assert region[1, :, 1:5].all() and not region[1, :, 0].any() and not region[1, :, 5:].any()
+    assert gen.edit_region(10, (0, 40), person=None, rows=5).all()
+    with pytest.raises(ValueError, match=r"edit frames 30:50 must satisfy 0 <= A < B <= 40"):
+        gen.edit_region(10, (30, 50), person=None, rows=5)
+
+
+def test_prompts_file_is_read_line_by_line(tmp_path):
+    path = tmp_path / "prompts.txt"
+    path.write_text("two people hug\n\n  one waves, the other bows  \n")
+    assert gen.read_prompts(path) == ["two people hug", "one waves, the other bows"]
+    path.write_text("\n \n")
+    with pytest.raises(ValueError, match="no prompt in the file"):
+        gen.read_prompts(path)
+
+
+def _interhuman_generator():
+    view = InterHumanView(mean=torch.zeros(262), std=torch.ones(262))
+    return SimpleNamespace(
+        vq=SimpleNamespace(view=view),
+        config=SimpleNamespace(data=SimpleNamespace(dataset="interhuman")),
+    )
+
+
+def test_motion_files_are_checked(tmp_path):
+    generator = _interhuman_generator()
+    good = tmp_path / "pair.npy"
+    np.save(good, np.zeros((2, 42, 262), dtype=np.float32))
+    assert gen.load_motion_file(good, generator).shape == (2, 40, 262)  # cropped to 4k frames
+    single = tmp_path / "one.npy"
+    np.save(single, np.zeros((16, 262), dtype=np.float32))
+    assert gen.load_motion_file(single, generator).shape == (1, 16, 262)
+    wrong = tmp_path / "joints.npy"
+    np.save(wrong, np.zeros((16, 22, 3), dtype=np.float32))
+    with pytest.raises(
+        ValueError, match=r"joints.npy: expected features .*got shape \(16, 22, 3\)"
+    ):
+        gen.load_motion_file(wrong, generator)
+    corrupt = tmp_path / "corrupt.npy"
+    corrupt.write_bytes(b"not numpy")
+    with pytest.raises(ValueError, match="corrupt.npy: not a readable .npy motion file"):
+        gen.load_motion_file(corrupt, generator)
+    nan = tmp_path / "nan.npy"
+    np.save(nan, np.full((16, 262), np.nan, dtype=np.float32))
+    with pytest.raises(ValueError, match="finite values"):
+        gen.load_motion_file(nan, generator)
+    with pytest.raises(FileNotFoundError, match="missing.npy: motion file not found"):
+        gen.load_motion_file(tmp_path / "missing.npy", generator)
+
+
+def test_cli_reports_an_unknown_checkpoint(tmp_path, capsys):
+    code = main(["generate", "--checkpoint", str(tmp_path / "nope.ckpt"), "--text", "hi"])
+    assert code == 2
+    assert "nope.ckpt: generator checkpoint not found" in capsys.readouterr().err
+    code = main(["generate", "--checkpoint", str(tmp_path), "--text", "hi"])
+    assert (
+        "not a generator checkpoint and no checkpoints/last.ckpt inside" in capsys.readouterr().err
+    )
