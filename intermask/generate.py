@@ -262,21 +262,38 @@ def render_sample(
     sample: Sample, directory: Path, *, fps: float, renders: Sequence[str]
 ) -> dict[str, Path]:
     """GIF / MP4 / HTML of one sample; the fixed person of a reaction is drawn as reference."""
-    from intermask.render import ViewerSample, save_gif, save_mp4, write_html_viewer
+    from intermask.render import (
+        ViewerSample,
+        render_frames,
+        write_gif,
+        write_html_viewer,
+        write_mp4,
+    )
 
     reference = 0 if sample.mode == "reaction" else None
     caption = sample.caption or "(no text)"
     paths: dict[str, Path] = {}
-    if "gif" in renders:
-        paths["gif"] = directory / "animation.gif"
-        save_gif(sample.joints, paths["gif"], fps=fps, caption=caption, reference_person=reference)
-    if "mp4" in renders:
-        paths["mp4"] = directory / "animation.mp4"
-        save_mp4(sample.joints, paths["mp4"], fps=fps, caption=caption, reference_person=reference)
+    if {"gif", "mp4"} & set(renders):
+        # draw once, encode twice
+        images = render_frames(
+            sample.joints, caption=caption, reference_person=reference, fps=fps, trails=True
+        )
+        if "gif" in renders:
+            paths["gif"] = write_gif(images, directory / "animation.gif", fps=fps)
+        if "mp4" in renders:
+            paths["mp4"] = write_mp4(images, directory / "animation.mp4", fps=fps)
     if "html" in renders:
         paths["html"] = directory / "viewer.html"
         write_html_viewer(
-            [ViewerSample(name=directory.name, caption=caption, joints=sample.joints, fps=fps)],
+            [
+                ViewerSample(
+                    name=directory.name,
+                    caption=caption,
+                    joints=sample.joints,
+                    fps=fps,
+                    reference_person=reference,
+                )
+            ],
             paths["html"],
         )
     return paths
