@@ -66,6 +66,12 @@ def test_train_gen_learns_on_frozen_tokens(synthetic_interhuman_root, vq_checkpo
         assert metrics[f"val_samples/{source}_joint_speed"] > 0.0
     # the GT skeleton is rigid; the decoded one of a barely trained VQ-VAE is not
     assert metrics["val_samples/real_bone_length_std"] < 1.0
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = next((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
+    accumulator = EventAccumulator(str(events.parent))
+    accumulator.Reload()
+    assert "samples/two people shake hands" in accumulator.Tags()["images"]  # SampleAnimations
     checkpoint = _last(tmp_path)
     assert checkpoint["global_step"] == 2
     assert all(key.startswith("net.") for key in checkpoint["state_dict"])  # frozen parts stay out

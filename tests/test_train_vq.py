@@ -66,6 +66,11 @@ def test_train_vq_writes_record_checkpoints_and_tensorboard(
         "val/mpjpe_mm",
     }
     assert expected <= tags, expected - tags
+    # SampleAnimations: GT beside its reconstruction, an animated GIF TensorBoard plays
+    images = accumulator.Tags()["images"]
+    assert "samples/reconstruction_0" in images
+    gif = accumulator.Images("samples/reconstruction_0")[-1].encoded_image_string
+    assert gif[:6] == b"GIF89a" and gif.count(b"\x21\xf9\x04") > 30  # one control block per frame
     # the checkpoint carries the normalization statistics and loads with weights_only=True
     state = _last(tmp_path)["state_dict"]
     assert bool(state["net.view.has_statistics"]) and state["net.view.std"].shape == (262,)
