@@ -149,6 +149,9 @@ class InterMBlock(nn.Module):
     ``cross_context_quirk`` makes the keys/values of cross attention the other person's
     embeddings from *before* spatio-temporal attention, as the reference code does; by default
     both sides come after it, as eq. 7 reads.
+
+    :meth:`forward_alternative` is the same block for alternative modeling (appendix E): only
+    one person's stream passes (1)-(5), and (4) reads a fixed context.
     """
 
     def __init__(
@@ -204,3 +207,30 @@ class InterMBlock(nn.Module):
 
         a, b = persons.chunk(2, dim=0)
         return torch.cat([a, sep, b], dim=1)
+
+    def forward_alternative(
+        self,
+        x: torch.Tensor,
+        context: torch.Tensor,
+        c: torch.Tensor,
+        padding: torch.Tensor,
+        context_padding: torch.Tensor,
+        *,
+        rows: int,
+    ) -> torch.Tensor:
+        """Alternative modeling (appendix E, figure 8a): the predicted person's stream only.
+
+        (G, N, D) stream ``x`` of the predicted person, (G, N, D) ``context`` (the other
+        person's input embeddings, the same tensor in every block: it is never updated),
+        (G, D) condition, (G, N) key padding of each -> (G, N, D). Self attention (1) covers
+        the predicted person's tokens only; the other person enters through (4) alone.
+        """
+        if self.cross_attention is None:
+            raise RuntimeError("alternative modeling needs the cross-attention sub-layer")
+        if self.self_attention is not None:
+            x = self.self_attention(x, c, padding)
+        x = self.joint_ffn(x, c)
+        if self.spatio_temporal is not None:
+            x = self.spatio_temporal(x, c, padding, rows=rows)
+        x = self.cross_attention(x, context, c, context_padding)
+        return self.person_ffn(x, c)

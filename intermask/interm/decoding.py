@@ -11,12 +11,19 @@ sample). A token that survives a re-masking is never masked again; after the las
 Interaction generation generates everything; reaction generation fixes person A's tokens
 (appendix G, "the reference tokens remain unmasked throughout"); inpainting (MoMask) fixes every
 token outside a region.
+
+A model with ``modeling="alternative"`` (appendix E, figure 8b) decodes one person per forward
+pass: in each of the ``I`` rounds person A's masked tokens are predicted and re-masked by
+confidence, then person B's, conditioned on A's current tokens; each person follows its own
+schedule ``ceil(gamma((i + 1) / I) * n_p)``. ``I`` is then I_alter, the iterations *per person*
+(at most 2I forward passes; a person with nothing left to generate, e.g. the reference person of
+a reaction, is skipped).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import torch
@@ -45,6 +52,26 @@ def null_condition(model: InterMTransformer, batch: int, device: torch.device) -
     return model.encode_condition(TextFeatures(features, eot), drop_condition=drop)
 
 
+def _guided(
+    run: Callable[..., torch.Tensor],
+    token_maps: tuple[torch.Tensor, ...],
+    condition: torch.Tensor | None,
+    null: torch.Tensor,
+    lengths_in_steps: torch.Tensor,
+    cfg_scale: float,
+) -> torch.Tensor:
+    """``run(*token_maps, condition, lengths)`` with guidance: conditional and null condition
+    stacked into one doubled batch, combined as ``uncond + s * (cond - uncond)``."""
+    if condition is None or cfg_scale == 1.0:
+        return run(*token_maps, null if condition is None else condition, lengths_in_steps)
+    doubled = [torch.cat([t, t]) for t in token_maps]
+    out = run(
+        *doubled, torch.cat([condition, null]), torch.cat([lengths_in_steps, lengths_in_steps])
+    )
+    cond, uncond = out.chunk(2)
+    return uncond + cfg_scale * (cond - uncond)
+
+
 def guided_logits(
     model: InterMTransformer,
     tokens: torch.Tensor,
@@ -58,19 +85,33 @@ def guided_logits(
     Without a condition, or with ``s = 1``, the batch is not doubled: the null or the
     conditional logits are returned as they are.
     """
-    if condition is None or cfg_scale == 1.0:
-        used = null if condition is None else condition
-        out = model.forward_with_condition(tokens[:, 0], tokens[:, 1], used, lengths_in_steps)
+
+    def run(a, b, c, lengths):
+        out = model.forward_with_condition(a, b, c, lengths)
         return torch.stack([out.logits_a, out.logits_b], dim=1)
-    doubled = torch.cat([tokens, tokens])
-    out = model.forward_with_condition(
-        doubled[:, 0],
-        doubled[:, 1],
-        torch.cat([condition, null]),
-        torch.cat([lengths_in_steps, lengths_in_steps]),
+
+    return _guided(run, (tokens[:, 0], tokens[:, 1]), condition, null, lengths_in_steps, cfg_scale)
+
+
+def guided_person_logits(
+    model: InterMTransformer,
+    tokens: torch.Tensor,
+    person: int,
+    condition: torch.Tensor | None,
+    null: torch.Tensor,
+    lengths_in_steps: torch.Tensor,
+    cfg_scale: float,
+) -> torch.Tensor:
+    """Alternative modeling: (B, 2, rows, T') tokens -> (B, rows, T', K) guided logits of
+    ``person`` (0 = A, 1 = B), conditioned on the other person's tokens; one forward pass."""
+    return _guided(
+        model.forward_person,
+        (tokens[:, person], tokens[:, 1 - person]),
+        condition,
+        null,
+        lengths_in_steps,
+        cfg_scale,
     )
-    cond, uncond = torch.stack([out.logits_a, out.logits_b], dim=1).chunk(2)
-    return uncond + cfg_scale * (cond - uncond)
 
 
 def top_k_filter(logits: torch.Tensor, ratio: float) -> torch.Tensor:
@@ -85,21 +126,25 @@ def sample_codes(
     lengths_in_steps: torch.Tensor,
     generators: Sequence[torch.Generator],
     temperature: float,
+    active: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """(B, 2, rows, T', K) filtered logits -> (B, 2, rows, T') codes, by the Gumbel-max trick
-    on ``logits / temperature`` (an exact sample of ``softmax(logits / temperature)``).
+    """(B, ..., T', K) filtered logits -> (B, ..., T') codes, by the Gumbel-max trick on
+    ``logits / temperature`` (an exact sample of ``softmax(logits / temperature)``).
 
     Each sample's noise comes from its own generator and has its own clip length, so its codes
     do not depend on the rest of the batch or on T'; this per-sample draw is the only Python
-    loop of the decoding. ``temperature = 0`` is greedy (argmax) decoding.
+    loop of the decoding. Samples where ``active`` (B,) is False draw nothing (their generator
+    is not advanced) and get the argmax. ``temperature = 0`` is greedy (argmax) decoding.
     """
     if temperature == 0:
         return logits.argmax(dim=-1)
     uniform = torch.full_like(logits, 0.5)
     for b, generator in enumerate(generators):
+        if active is not None and not bool(active[b]):
+            continue
         length = int(lengths_in_steps[b])
-        shape = (*logits.shape[1:3], length, logits.shape[-1])
-        uniform[b, :, :, :length] = torch.rand(shape, generator=generator, device=logits.device)
+        shape = (*logits.shape[1:-2], length, logits.shape[-1])
+        uniform[b, ..., :length, :] = torch.rand(shape, generator=generator, device=logits.device)
     gumbel = -torch.log(-torch.log(uniform.clamp(1e-20, 1 - 1e-7)))
     return (logits / temperature + gumbel).argmax(dim=-1)
 
@@ -153,6 +198,100 @@ def _start(
     return tokens.masked_fill(~valid, -1), generated
 
 
+class _Settings(NamedTuple):
+    condition: torch.Tensor | None  # (B, D), None = null condition only
+    null: torch.Tensor  # (B, D)
+    lengths_in_steps: torch.Tensor  # (B,)
+    cfg_scale: float
+    top_k_ratio: float
+    temperature: float
+    generators: list[torch.Generator]
+
+
+def _sample(
+    logits: torch.Tensor, settings: _Settings, active: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(B, ..., T', K) guided logits -> sampled codes and the probability of each under the
+    guided logits before top-k and temperature (as in the reference), both (B, ..., T')."""
+    filtered = top_k_filter(logits, settings.top_k_ratio)
+    sampled = sample_codes(
+        filtered, settings.lengths_in_steps, settings.generators, settings.temperature, active
+    )
+    confidence = logits.float().log_softmax(-1).gather(-1, sampled[..., None])[..., 0].exp()
+    return sampled, confidence
+
+
+def _remask(
+    confidence: torch.Tensor, undecided: torch.Tensor, n_generated: torch.Tensor, progress: float
+) -> torch.Tensor:
+    """The ``ceil(gamma(progress) * n)`` least confident of the ``undecided`` (B, ...) positions
+    just sampled stay undecided; a kept token never returns."""
+    count = scheduled_count(cosine_schedule(progress), n_generated)
+    scores = confidence.masked_fill(~undecided, math.inf)
+    return lowest_ranks(scores, count) & undecided
+
+
+def _decode_collaborative(
+    model: InterMTransformer,
+    tokens: torch.Tensor,
+    undecided: torch.Tensor,
+    iterations: int,
+    settings: _Settings,
+) -> torch.Tensor:
+    """Both persons in every pass (section 3.3): (B, 2, rows, T') -> (B, 2, rows, T')."""
+    n_generated = undecided.flatten(1).sum(1)  # (B,)
+    for i in range(iterations):
+        logits = guided_logits(
+            model,
+            tokens,
+            settings.condition,
+            settings.null,
+            settings.lengths_in_steps,
+            settings.cfg_scale,
+        )
+        sampled, confidence = _sample(logits, settings)
+        tokens = torch.where(undecided, sampled, tokens)
+        undecided = _remask(confidence, undecided, n_generated, (i + 1) / iterations)
+        tokens = tokens.masked_fill(undecided, model.vocabulary.mask_id)
+    return tokens
+
+
+def _decode_alternative(
+    model: InterMTransformer,
+    tokens: torch.Tensor,
+    undecided: torch.Tensor,
+    iterations: int,
+    settings: _Settings,
+) -> torch.Tensor:
+    """One person per pass, A then B in each round (appendix E): (B, 2, rows, T') -> same."""
+    n_generated = undecided.flatten(2).sum(2)  # (B, 2)
+    persons = [tokens[:, 0], tokens[:, 1]]
+    pending = [undecided[:, 0], undecided[:, 1]]
+    for i in range(iterations):
+        for person in (0, 1):
+            todo = pending[person]  # (B, rows, T')
+            if not bool(todo.any()):
+                continue  # nothing of this person left anywhere in the batch: skip the pass
+            logits = guided_person_logits(
+                model,
+                torch.stack(persons, dim=1),
+                person,
+                settings.condition,
+                settings.null,
+                settings.lengths_in_steps,
+                settings.cfg_scale,
+            )
+            # a sample with nothing of this person left draws no noise, so that its result does
+            # not depend on whether other samples of the batch forced this pass
+            sampled, confidence = _sample(logits, settings, active=todo.flatten(1).any(1))
+            own = torch.where(todo, sampled, persons[person])
+            pending[person] = _remask(
+                confidence, todo, n_generated[:, person], (i + 1) / iterations
+            )
+            persons[person] = own.masked_fill(pending[person], model.vocabulary.mask_id)
+    return torch.stack(persons, dim=1)
+
+
 @torch.no_grad()
 def generate(
     model: InterMTransformer,
@@ -175,7 +314,8 @@ def generate(
             from the null condition only (no guidance), e.g. reaction without text.
         lengths_in_steps: (B,) clip lengths in token steps; ``steps`` (T') defaults to the
             longest (or the width of the given tokens).
-        iterations: I, one forward pass each.
+        iterations: I, one forward pass each; for an alternative-modeling model I_alter, the
+            rounds per person (A then B in each round, one pass per person).
         cfg_scale: s in ``uncond + s * (cond - uncond)`` on logits.
         top_k_ratio: sampling keeps the ``ceil(ratio * K)`` largest logits.
         temperature: logits are divided by it before sampling (the reference divides the
@@ -183,7 +323,7 @@ def generate(
         seeds: (B,) one seed per sample; a sample's result depends only on its own seed,
             text, length and fixed tokens, not on the other samples of the batch.
         reference_tokens: (B, rows, T') person A's codes for reaction generation; A stays
-            fixed and only person B is generated.
+            fixed and only person B is generated (alternative modeling: B's passes only).
         edit: :class:`Edit` for inpainting: only ``edit.region`` changes.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
@@ -201,7 +341,6 @@ def generate(
     valid = ~step_padding_mask(lengths_in_steps, steps)[:, None, None, :]  # (B, 1, 1, T')
     valid = valid.expand(batch, 2, model.rows, steps)
     tokens, undecided = _start(model, valid, reference_tokens, edit)
-    n_generated = undecided.flatten(1).sum(1)  # (B,)
     generators = _generators(seeds, batch, device) if temperature > 0 else []
 
     was_training = model.training
@@ -209,17 +348,13 @@ def generate(
     try:
         condition = None if text is None else model.encode_condition(text)
         null = null_condition(model, batch, device)
-        for i in range(iterations):
-            logits = guided_logits(model, tokens, condition, null, lengths_in_steps, cfg_scale)
-            filtered = top_k_filter(logits, top_k_ratio)
-            sampled = sample_codes(filtered, lengths_in_steps, generators, temperature)
-            confidence = logits.float().log_softmax(-1).gather(-1, sampled[..., None])[..., 0].exp()
-            tokens = torch.where(undecided, sampled, tokens)
-            # re-mask the least confident of the positions sampled now; kept tokens never return
-            count = scheduled_count(cosine_schedule((i + 1) / iterations), n_generated)
-            scores = confidence.masked_fill(~undecided, math.inf)
-            undecided = lowest_ranks(scores, count) & undecided
-            tokens = tokens.masked_fill(undecided, model.vocabulary.mask_id)
+        settings = _Settings(
+            condition, null, lengths_in_steps, cfg_scale, top_k_ratio, temperature, generators
+        )
+        if model.modeling == "alternative":
+            tokens = _decode_alternative(model, tokens, undecided, iterations, settings)
+        else:
+            tokens = _decode_collaborative(model, tokens, undecided, iterations, settings)
     finally:
         model.train(was_training)
     return tokens.masked_fill(~valid, -1)

@@ -8,6 +8,10 @@ blocks conditioned on ``c`` through AdaLN-Zero, and the output process (section 
 Text: frozen CLIP ViT-L/14@336px per-token features (computed outside this module) pass a
 trainable 2-layer TransformerEncoder and a LayerNorm; the feature at the end-of-text token,
 projected to D, is ``c``. It enters the network only through AdaLN.
+
+Modeling (Table 3, appendix E): ``collaborative`` (the paper's model) runs both persons through
+every block together; ``alternative`` (the ablation) predicts one person at a time from its own
+stream, conditioned on the other person's input embeddings through cross attention only.
 """
 
 from __future__ import annotations
@@ -15,12 +19,15 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import torch
+from einops import rearrange
 from torch import nn
 
 from intermask.interm.attention import MultiHeadAttention
 from intermask.interm.blocks import AdaLNModulation, InterMBlock, adaptive_norm, modulate
 from intermask.interm.position import add_grid_encoding
 from intermask.interm.tokens import Vocabulary, build_sequence, sequence_padding_mask, split_persons
+
+MODELINGS = ("collaborative", "alternative")  # Table 3: ours vs the appendix E ablation
 
 
 class TextFeatures(NamedTuple):
@@ -79,6 +86,11 @@ class InterMTransformer(nn.Module):
             ablations.
         double_residual_quirk, cross_context_quirk: reproduce reference-code behaviour, see
             :class:`~intermask.interm.blocks.InterMBlock`.
+        modeling: ``"collaborative"`` (section 3.2) or ``"alternative"`` (appendix E, Table 3).
+            Alternative modeling builds the same layers (same parameter count) but updates only
+            the predicted person's embeddings in the blocks; the other person's input
+            embeddings condition it through cross attention, so it needs
+            ``use_cross_attention`` and has no use for ``cross_context_quirk``.
     """
 
     def __init__(
@@ -102,14 +114,28 @@ class InterMTransformer(nn.Module):
         use_cross_attention: bool = True,
         double_residual_quirk: bool = False,
         cross_context_quirk: bool = False,
+        modeling: str = "collaborative",
     ) -> None:
         super().__init__()
+        if modeling not in MODELINGS:
+            raise ValueError(f"modeling must be one of {MODELINGS}, got {modeling!r}")
+        if modeling == "alternative" and not use_cross_attention:
+            raise ValueError(
+                "modeling='alternative' conditions the predicted person on the other person only "
+                "through cross attention; it cannot be combined with use_cross_attention=False"
+            )
+        if modeling == "alternative" and cross_context_quirk:
+            raise ValueError(
+                "cross_context_quirk has no effect with modeling='alternative' (the context is "
+                "always the other person's input embeddings); leave it False"
+            )
         if width % 4:
             raise ValueError(
                 f"width must be divisible by 4 for the 2D positional encoding, got {width}"
             )
         self.vocabulary = Vocabulary(codebook_size)
         self.codebook_size, self.rows, self.text_dim = codebook_size, rows, text_dim
+        self.modeling = modeling
 
         self.token_embedding = nn.Embedding(self.vocabulary.size, token_embed_dim)
         self.token_projection = nn.Linear(token_embed_dim, width)
@@ -185,6 +211,41 @@ class InterMTransformer(nn.Module):
             eot = eot.masked_fill(drop_condition.bool()[:, None], 0.0)
         return self.condition_projection(eot)
 
+    def _embed(
+        self, tokens_a: torch.Tensor, tokens_b: torch.Tensor, lengths_in_steps: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Input process -> (B, 2N + 1, D) embeddings of ``[A, SEP, B]`` and their (B, 2N + 1)
+        key padding mask."""
+        if tokens_a.ndim != 3 or tokens_a.shape[1] != self.rows:
+            raise ValueError(f"tokens must be (B, {self.rows}, T'), got {tuple(tokens_a.shape)}")
+        sequence = build_sequence(
+            tokens_a,
+            tokens_b,
+            codebook_size=self.codebook_size,
+            lengths_in_steps=lengths_in_steps,
+        )  # (B, 2N + 1)
+        padding = sequence_padding_mask(sequence, codebook_size=self.codebook_size)
+        x = self.token_projection(self.token_embedding(sequence))  # (B, 2N + 1, D)
+        steps = tokens_a.shape[-1]
+        return self.input_dropout(add_grid_encoding(x, rows=self.rows, steps=steps)), padding
+
+    def _predict_one_person(
+        self,
+        x: torch.Tensor,
+        context: torch.Tensor,
+        condition: torch.Tensor,
+        padding: torch.Tensor,
+        context_padding: torch.Tensor,
+        steps: int,
+    ) -> torch.Tensor:
+        """Alternative modeling: (G, N, D) predicted stream, (G, N, D) fixed context -> (G, rows,
+        T', K) logits of the predicted person."""
+        for block in self.blocks:
+            x = block.forward_alternative(
+                x, context, condition, padding, context_padding, rows=self.rows
+            )
+        return rearrange(self.head(x, condition), "g (r t) k -> g r t k", t=steps)
+
     def forward_with_condition(
         self,
         tokens_a: torch.Tensor,
@@ -194,22 +255,52 @@ class InterMTransformer(nn.Module):
     ) -> InterMOutput:
         """Like :meth:`forward` with a precomputed (B, D) condition (e.g. conditional and null
         conditions stacked for guidance)."""
-        if tokens_a.ndim != 3 or tokens_a.shape[1] != self.rows:
-            raise ValueError(f"tokens must be (B, {self.rows}, T'), got {tuple(tokens_a.shape)}")
         steps = tokens_a.shape[-1]
-        sequence = build_sequence(
-            tokens_a,
-            tokens_b,
-            codebook_size=self.codebook_size,
-            lengths_in_steps=lengths_in_steps,
-        )  # (B, 2N + 1)
-        padding = sequence_padding_mask(sequence, codebook_size=self.codebook_size)
-        x = self.token_projection(self.token_embedding(sequence))  # (B, 2N + 1, D)
-        x = self.input_dropout(add_grid_encoding(x, rows=self.rows, steps=steps))
+        x, padding = self._embed(tokens_a, tokens_b, lengths_in_steps)
+        if self.modeling == "alternative":
+            # both directions in one batch: A's stream reads B's embeddings and vice versa
+            n = self.rows * steps
+            a, _, b = x.split([n, 1, n], dim=1)
+            pad_a, _, pad_b = padding.split([n, 1, n], dim=1)
+            logits = self._predict_one_person(
+                torch.cat([a, b]),
+                torch.cat([b, a]),
+                torch.cat([condition, condition]),
+                torch.cat([pad_a, pad_b]),
+                torch.cat([pad_b, pad_a]),
+                steps,
+            )  # (2B, rows, T', K)
+            return InterMOutput(*logits.chunk(2))
         for block in self.blocks:
             x = block(x, condition, padding, rows=self.rows)
         logits = self.head(x, condition)  # (B, 2N + 1, K)
         return InterMOutput(*split_persons(logits, rows=self.rows, steps=steps))
+
+    def forward_person(
+        self,
+        tokens: torch.Tensor,
+        partner_tokens: torch.Tensor,
+        condition: torch.Tensor,
+        lengths_in_steps: torch.Tensor,
+    ) -> torch.Tensor:
+        """Alternative modeling only: (B, rows, T') tokens of the predicted person and of its
+        partner, (B, D) condition -> (B, rows, T', K) logits of the predicted person.
+
+        One direction of :meth:`forward_with_condition` at half its cost (alternative
+        decoding predicts one person per iteration).
+        """
+        if self.modeling != "alternative":
+            raise ValueError(
+                "forward_person predicts one person (alternative modeling); this model is "
+                f"{self.modeling!r}: use forward / forward_with_condition"
+            )
+        steps, n = tokens.shape[-1], self.rows * tokens.shape[-1]
+        x, padding = self._embed(tokens, partner_tokens, lengths_in_steps)
+        own, _, partner = x.split([n, 1, n], dim=1)
+        own_padding, _, partner_padding = padding.split([n, 1, n], dim=1)
+        return self._predict_one_person(
+            own, partner, condition, own_padding, partner_padding, steps
+        )
 
     def forward(
         self,
@@ -224,6 +315,8 @@ class InterMTransformer(nn.Module):
         Tokens are codes, [MASK], [PAD] or -1; steps at or beyond ``lengths_in_steps`` (B,) are
         padding whatever they hold. ``text`` is :class:`TextFeatures` or ``(features,
         eot_index)``; ``drop_condition`` (B,) bool replaces ``c`` by the null condition.
+        With ``modeling="alternative"`` each person's logits come from its own stream
+        conditioned on the other person's input embeddings (both directions in one batch).
         """
         condition = self.encode_condition(text, drop_condition)
         return self.forward_with_condition(tokens_a, tokens_b, condition, lengths_in_steps)

@@ -1,0 +1,88 @@
+"""Every gen_* experiment composes, lands its switches and builds its network (Table 3)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
+
+from intermask.interm.model import InterMTransformer
+from intermask.train import CONFIG_DIR
+
+PAPER = {
+    "modeling": "collaborative",
+    "use_self_attention": True,
+    "use_spatio_temporal_attention": True,
+    "use_cross_attention": True,
+    "p_random": 0.8,
+    "step_unroll": True,
+}
+EXPERIMENTS = {
+    "gen_interhuman": {},
+    "gen_interx": {},
+    "gen_ablation_alternative": {"modeling": "alternative"},
+    "gen_ablation_no_self_attention": {"use_self_attention": False},
+    "gen_ablation_no_spatio_temporal": {"use_spatio_temporal_attention": False},
+    "gen_ablation_no_cross_attention": {"use_cross_attention": False},
+    "gen_ablation_no_step_unroll": {"step_unroll": False},
+    "gen_ablation_no_interaction_masking": {"p_random": 1.0},
+    "gen_ablation_no_step_unroll_no_interaction_masking": {"p_random": 1.0, "step_unroll": False},
+}
+TINY_NET = {
+    "codebook_size": 16,
+    "width": 32,
+    "heads": 2,
+    "depth": 1,
+    "ff": 32,
+    "token_embed_dim": 16,
+    "text_dim": 32,
+    "text_layers": 1,
+    "text_heads": 2,
+    "text_ff": 32,
+}
+
+
+def _compose(experiment: str):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        return compose(
+            "train_gen",
+            overrides=[f"experiment={experiment}", "vq_ckpt=unused", "paths.output_dir=/tmp/x"],
+        )
+
+
+def test_every_gen_experiment_file_is_covered():
+    files = {path.stem for path in Path(CONFIG_DIR, "experiment").glob("gen_*.yaml")}
+    assert files == set(EXPERIMENTS)
+
+
+@pytest.mark.parametrize("experiment", sorted(EXPERIMENTS))
+def test_gen_experiment_lands_its_switches_on_the_paper_setting(experiment):
+    cfg = _compose(experiment)
+    expected = {**PAPER, **EXPERIMENTS[experiment]}
+    net, model = cfg.model.net, cfg.model
+    landed = {key: (model[key] if key in model else net[key]) for key in expected}
+    assert landed == expected
+    interx = experiment == "gen_interx"
+    assert cfg.data.dataset == ("interx" if interx else "interhuman")
+    assert cfg.data.max_length == (150 if interx else 300)
+    # appendix C: batch 52, 500 epochs, warm-up a quarter of the first epoch, bf16 GPU
+    assert cfg.data.batch_size == 52 and cfg.trainer.max_epochs == 500
+    assert cfg.trainer.accelerator == "gpu" and cfg.trainer.precision == "bf16-mixed"
+    assert model.warmup_fraction == pytest.approx(0.25 / 500) and model.condition_drop == 0.1
+    assert (net.width, net.depth, net.heads, net.double_residual_quirk) == (384, 6, 6, False)
+    OmegaConf.resolve(cfg)
+    tiny = instantiate(OmegaConf.merge(net, TINY_NET))
+    assert isinstance(tiny, InterMTransformer) and tiny.modeling == expected["modeling"]
+    assert all(
+        (block.cross_attention is not None) == net.use_cross_attention for block in tiny.blocks
+    )
+    assert all(
+        (block.self_attention is not None) == net.use_self_attention for block in tiny.blocks
+    )
+    assert all(
+        (block.spatio_temporal is not None) == net.use_spatio_temporal_attention
+        for block in tiny.blocks
+    )
