@@ -1,0 +1,124 @@
+"""Intersection Volume (IV) and Intersection Frequency (IF) of two persons (ARFlow section 4.1).
+
+Both measure the skeleton capsule proxy of ``intermask.physics`` (no SMPL-X meshes here), so the
+numbers compare with each other, not with the ARFlow tables. The math lives in
+``intermask.physics.volume``; these classes only accumulate it. Sums are float64 states reduced by
+summation, so DDP gathers them exactly.
+"""
+
+from __future__ import annotations
+
+import torch
+from torchmetrics import Metric
+
+from intermask.physics.capsules import BodyProxy
+from intermask.physics.volume import (
+    DEFAULT_CHUNK_VOXELS,
+    DEFAULT_PITCH,
+    DEFAULT_TOLERANCE,
+    intersection_volume,
+    penetrating_frames,
+)
+
+
+class _PenetrationMetric(Metric):
+    full_state_update = False
+    higher_is_better = False
+
+    def __init__(
+        self,
+        *,
+        pitch: float = DEFAULT_PITCH,
+        proxy: BodyProxy | None = None,
+        chunk_voxels: int = DEFAULT_CHUNK_VOXELS,
+    ) -> None:
+        super().__init__()
+        if not pitch > 0:
+            raise ValueError(f"{type(self).__name__}: pitch must be > 0 metres, got {pitch}")
+        self.pitch = pitch
+        self.proxy = proxy
+        self.chunk_voxels = chunk_voxels
+        self.add_state(
+            "total", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum"
+        )
+        self.add_state(
+            "frames", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum"
+        )
+
+    def _volumes(
+        self, joints_a: torch.Tensor, joints_b: torch.Tensor, frame_mask: torch.Tensor | None
+    ) -> torch.Tensor:
+        """(B, T, 22, 3) x2, (B, T) | None -> IV (V,) in cm^3 of the valid frames."""
+        if joints_a.ndim != 4:
+            raise ValueError(
+                f"{type(self).__name__}.update: joints must be (B, T, 22, 3), got "
+                f"{tuple(joints_a.shape)}"
+            )
+        volume = intersection_volume(
+            joints_a,
+            joints_b,
+            pitch=self.pitch,
+            proxy=self.proxy,
+            frame_mask=frame_mask,
+            chunk_voxels=self.chunk_voxels,
+        )
+        return volume if frame_mask is None else volume[frame_mask]
+
+    def _mean(self) -> torch.Tensor:
+        if self.frames == 0:
+            raise ValueError(f"{type(self).__name__}.compute() called before any valid frame")
+        return (self.total / self.frames).float()
+
+
+class IntersectionVolume(_PenetrationMetric):
+    """Mean per-frame intersection volume in cm^3 over valid frames (ARFlow eq. 18).
+
+    ``update(joints_a (B, T, 22, 3), joints_b (B, T, 22, 3), frame_mask (B, T) bool | None)``,
+    joints in metres.
+    """
+
+    def update(
+        self,
+        joints_a: torch.Tensor,
+        joints_b: torch.Tensor,
+        frame_mask: torch.Tensor | None = None,
+    ) -> None:
+        volume = self._volumes(joints_a, joints_b, frame_mask)
+        self.total += volume.double().sum()
+        self.frames += volume.numel()
+
+    def compute(self) -> torch.Tensor:
+        return self._mean()
+
+
+class IntersectionFrequency(_PenetrationMetric):
+    """Share in [0, 1] of valid frames whose intersection volume exceeds `tolerance` cm^3.
+
+    ``update(joints_a (B, T, 22, 3), joints_b (B, T, 22, 3), frame_mask (B, T) bool | None)``.
+    """
+
+    def __init__(
+        self,
+        *,
+        pitch: float = DEFAULT_PITCH,
+        proxy: BodyProxy | None = None,
+        tolerance: float = DEFAULT_TOLERANCE,
+        chunk_voxels: int = DEFAULT_CHUNK_VOXELS,
+    ) -> None:
+        super().__init__(pitch=pitch, proxy=proxy, chunk_voxels=chunk_voxels)
+        if tolerance < 0:
+            raise ValueError(f"IntersectionFrequency: tolerance must be >= 0 cm^3, got {tolerance}")
+        self.tolerance = tolerance
+
+    def update(
+        self,
+        joints_a: torch.Tensor,
+        joints_b: torch.Tensor,
+        frame_mask: torch.Tensor | None = None,
+    ) -> None:
+        volume = self._volumes(joints_a, joints_b, frame_mask)
+        self.total += penetrating_frames(volume, tolerance=self.tolerance).double().sum()
+        self.frames += volume.numel()
+
+    def compute(self) -> torch.Tensor:
+        return self._mean()
