@@ -8,13 +8,16 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-from-lock
 UV_VERSION := 0.13.8
 
-DATA ?= synthetic
+# DATA picks the dataset config (synthetic, synthetic_interx, interhuman, interx); empty = the job's
+# default (synthetic) or the dataset an experiment file selects (experiment=vq_interhuman).
+DATA ?=
+DATA_ARG = $(if $(DATA),data=$(DATA))
 CLIPS ?= 1000
 SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-gen tb clean
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo tb clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -58,14 +61,46 @@ data-stats: install ## compute normalization statistics: make data-stats ROOT=da
 	$(VENV)/bin/intermask data stats $(or $(ROOT),$(DATA_DIR)/synthetic/interhuman)
 
 train-vq: install ## train the VQ-VAE: make train-vq [DATA=synthetic|synthetic_interx|interhuman|interx] [ARGS="trainer.max_epochs=3"]
-	$(PY) -m intermask.train --config-name train_vq data=$(DATA) $(ARGS)
+	$(PY) -m intermask.train --config-name train_vq $(DATA_ARG) $(ARGS)
+
+train-evaluator: install ## train the text-motion evaluator of the metrics: make train-evaluator [DATA=...] [ARGS="experiment=evaluator_demo"]
+	$(PY) -m intermask.train --config-name train_evaluator $(DATA_ARG) $(ARGS)
 
 # the newest VQ run's last.ckpt unless VQ_CKPT is given
 VQ_CKPT ?= $(shell ls -t outputs/train_vq/runs/*/checkpoints/last.ckpt 2>/dev/null | head -n 1)
 
 train-gen: install ## train Inter-M on frozen VQ tokens: make train-gen [VQ_CKPT=.../last.ckpt] [DATA=...] [ARGS="..."]
 	@test -n "$(VQ_CKPT)" || { echo "train-gen: no VQ checkpoint; run make train-vq or pass VQ_CKPT=<run>/checkpoints/last.ckpt" >&2; exit 2; }
-	$(PY) -m intermask.train --config-name train_gen data=$(DATA) vq_ckpt=$(VQ_CKPT) $(ARGS)
+	$(PY) -m intermask.train --config-name train_gen $(DATA_ARG) vq_ckpt=$(VQ_CKPT) $(ARGS)
+
+train-arflow: install ## train ARFlow reactions: make train-arflow [DATA=...] [ARGS="experiment=arflow_demo"]
+	$(PY) -m intermask.train --config-name train_arflow $(DATA_ARG) $(ARGS)
+
+# the newest generator run and the newest evaluator's best checkpoint unless given
+GEN_CKPT ?= $(shell ls -td outputs/train_gen/runs/*/ 2>/dev/null | head -n 1)
+EVAL_CKPT ?= $(shell ls -t outputs/train_evaluator/runs/*/checkpoints/best*.ckpt 2>/dev/null | head -n 1)
+MODE ?= interaction
+
+eval: install ## the 20-replication protocol: make eval [GEN_CKPT=run] [EVAL_CKPT=ckpt] [DATA=...] [MODE=interaction|reaction|reconstruction] [ARGS="fast=true"]
+	@test -n "$(EVAL_CKPT)" || { echo "eval: no evaluator; run make train-evaluator or pass EVAL_CKPT=<ckpt>" >&2; exit 2; }
+	$(PY) -m intermask.evaluate $(DATA_ARG) mode=$(MODE) eval_ckpt=$(EVAL_CKPT) \
+		$(if $(filter reconstruction,$(MODE)),vq_ckpt=$(VQ_CKPT),gen_ckpt=$(GEN_CKPT)) $(ARGS)
+
+DEMO_DIR ?= outputs/demo
+DEMO_PROMPTS := --text "two people shake hands" --text "one person pushes the other"
+
+demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator, VQ-VAE, generator, protocol, samples (replaces DEMO_DIR)
+	rm -rf $(DEMO_DIR)
+	$(PY) -m intermask.train --config-name train_evaluator experiment=evaluator_demo hydra.run.dir=$(DEMO_DIR)/evaluator
+	$(PY) -m intermask.train --config-name train_vq experiment=vq_demo hydra.run.dir=$(DEMO_DIR)/vq
+	$(PY) -m intermask.train --config-name train_gen experiment=gen_demo hydra.run.dir=$(DEMO_DIR)/gen \
+		vq_ckpt=$(DEMO_DIR)/vq/checkpoints/last.ckpt
+	$(PY) -m intermask.evaluate experiment=eval_demo hydra.run.dir=$(DEMO_DIR)/eval gen_ckpt=$(DEMO_DIR)/gen \
+		eval_ckpt=$$(ls $(DEMO_DIR)/evaluator/checkpoints/best*.ckpt | head -n 1)
+	$(VENV)/bin/intermask generate --checkpoint $(DEMO_DIR)/gen $(DEMO_PROMPTS) --seconds 4 --samples 2 \
+		--out $(DEMO_DIR)/samples
+	@echo; echo "demo done: table $(DEMO_DIR)/eval/results.md; checkpoints $(DEMO_DIR)/{evaluator,vq,gen}/checkpoints;" \
+		"samples $(DEMO_DIR)/samples/*/{animation.gif,viewer.html}; logs: make tb LOGDIR=$(DEMO_DIR)"
 
 tb: install ## TensorBoard over all runs: make tb [LOGDIR=outputs]
 	$(VENV)/bin/tensorboard --logdir $(or $(LOGDIR),outputs) --bind_all
