@@ -1,0 +1,174 @@
+"""EvaluatorModule: trains a contrastive text-motion evaluator (loss, optimizer, logging)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any, Literal
+
+import lightning as L
+import torch
+from torch.optim import Optimizer
+from torch.optim.lr_scheduler import LambdaLR
+
+from intermask.data.normalization import Normalizer
+from intermask.evaluator.checkpoints import VOCABULARY_KEY
+from intermask.evaluator.gru_matcher import GRUMatcher
+from intermask.evaluator.interclip import InterCLIP
+from intermask.evaluator.losses import RetrievalAccuracy, clip_loss, margin_loss
+from intermask.evaluator.vocabulary import Vocabulary
+
+log = logging.getLogger(__name__)
+LossKind = Literal["clip", "margin"]
+
+
+class EvaluatorModule(L.LightningModule):
+    """Trains :class:`InterCLIP` or :class:`GRUMatcher` on interaction batches.
+
+    Batch: ``motion`` (B, 2, T, *F) as the datamodule gives it (normalized or not), ``length``
+    (B,), ``caption`` (B strings) and, on Inter-X, ``tokens`` (B ``"word/POS ..."`` strings).
+    The motion is de-normalized with the datamodule's statistics first: evaluators always see
+    feature units, exactly as the protocol feeds them.
+
+    Args:
+        net: the evaluator network.
+        optimizer: partial optimizer taking the trainable parameters.
+        loss: "clip" (InterGen: symmetric cross-entropy, logit scale latent_scale^2; InterCLIP
+            only) or "margin" (T2M: matching distance^2 + hinge^2 on shifted negatives).
+        margin: T2M's negative margin (10).
+        trained_on: the data config's name; becomes part of the evaluator's name.
+        retrieval_group_size: R-precision groups for validation (protocol eval batch).
+        min_word_count: words seen fewer times in the training split map to ``unk`` (learned
+            GRU vocabulary only).
+        warmup_steps: linear learning-rate warm-up over this many optimizer steps, then
+            constant (0: constant from the start, as T2M trains its matcher).
+    """
+
+    def __init__(
+        self,
+        *,
+        net: InterCLIP | GRUMatcher,
+        optimizer: Callable[..., Optimizer],
+        loss: LossKind,
+        trained_on: str,
+        margin: float = 10.0,
+        retrieval_group_size: int = 96,
+        min_word_count: int = 1,
+        warmup_steps: int = 0,
+    ) -> None:
+        super().__init__()
+        if loss not in ("clip", "margin"):
+            raise ValueError(f"loss must be 'clip' or 'margin', got {loss!r}")
+        if loss == "clip" and not isinstance(net, InterCLIP):
+            raise ValueError(
+                f"loss 'clip' needs the learnable latent_scale of InterCLIP, got {type(net).__name__}"
+            )
+        self.net = net
+        self.optimizer_factory = optimizer
+        self.save_hyperparameters(
+            {
+                "loss": str(loss),
+                "margin": float(margin),
+                "trained_on": str(trained_on),
+                "retrieval_group_size": int(retrieval_group_size),
+                "min_word_count": int(min_word_count),
+                "warmup_steps": int(warmup_steps),
+            },
+            logger=False,
+        )
+        self.val_retrieval = RetrievalAccuracy(group_size=retrieval_group_size)
+        self._normalizer: Normalizer | None = None
+
+    # ------------------------------------------------------------------ data
+
+    def setup(self, stage: str) -> None:
+        """Take the datamodule's statistics and, for a learned GRU vocabulary, its words."""
+        datamodule = getattr(self.trainer, "datamodule", None) if self._trainer else None
+        if datamodule is None:
+            raise RuntimeError(
+                "EvaluatorModule needs the InteractionDataModule (fit with datamodule=)"
+            )
+        self._normalizer = datamodule.normalizer
+        if isinstance(self.net, GRUMatcher) and self.net.vocabulary is None:
+            if "train" not in datamodule.datasets:
+                datamodule.setup("fit")
+            self.net.set_vocabulary(self._training_words(datamodule.datasets["train"]).words)
+            log.info("learned word embedding over %d training words", len(self.net.vocabulary))
+
+    def _training_words(self, dataset: Any) -> Vocabulary:
+        captions = getattr(dataset, "captions", None)
+        if not captions or not hasattr(captions[0][0], "tokens"):
+            raise ValueError(
+                f"the GRU matcher reads POS-tagged tokens, but {type(dataset).__name__} has none "
+                "(use it with Inter-X data)"
+            )
+        strings = (caption.tokens for clip in captions for caption in clip)
+        return Vocabulary.from_token_strings(strings, min_count=self.hparams.min_word_count)
+
+    def denormalize(self, motion: torch.Tensor) -> torch.Tensor:
+        """(B, 2, T, *F) datamodule motion -> feature units."""
+        return motion if self._normalizer is None else self._normalizer.denormalize(motion)
+
+    # ------------------------------------------------------------------ steps
+
+    def embed(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Batch -> (text (B, 512), motion (B, 512)) embeddings, rows in batch order."""
+        motion = self.denormalize(batch["motion"])
+        text = self.net.encode_text(batch["caption"], batch.get("tokens"))
+        return text, self.net.encode_motion(motion, batch["length"])
+
+    def compute_loss(self, text: torch.Tensor, motion: torch.Tensor) -> torch.Tensor:
+        text, motion = text.float(), motion.float()
+        if self.hparams.loss == "clip":
+            return clip_loss(text, motion, self.net.logit_scale())
+        if len(text) < 2:
+            raise ValueError("the margin loss needs batches of at least 2 pairs")
+        shift = int(torch.randint(1, len(text), ()))
+        return margin_loss(text, motion, margin=self.hparams.margin, shift=shift)
+
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        text, motion = self.embed(batch)
+        loss = self.compute_loss(text, motion)
+        batch_size = len(text)
+        self.log("train/loss", loss, batch_size=batch_size, prog_bar=True)
+        if isinstance(self.net, InterCLIP):
+            self.log(
+                "train/latent_scale",
+                self.net.latent_scale.detach().squeeze(0),
+                batch_size=batch_size,
+            )
+        return loss
+
+    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
+        text, motion = self.embed(batch)
+        if len(text) >= 2:
+            loss = self.compute_loss(text, motion)
+            self.log("val/loss", loss, batch_size=len(text), sync_dist=True, prog_bar=True)
+        self.val_retrieval.update(text, motion)
+
+    def on_validation_epoch_end(self) -> None:
+        result = self.val_retrieval.compute()
+        self.val_retrieval.reset()
+        for name, value in result.items():
+            self.log(f"val/{name}", value, prog_bar=name == "top3")
+
+    def configure_optimizers(self) -> dict[str, Any]:
+        optimizer = self.optimizer_factory(params=[p for p in self.parameters() if p.requires_grad])
+        warmup = self.hparams.warmup_steps
+        schedule = LambdaLR(
+            optimizer, lambda step: min(1.0, (step + 1) / warmup) if warmup else 1.0
+        )
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": schedule, "interval": "step"}}
+
+    # ------------------------------------------------------------------ checkpoints
+
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        # plain strings: the checkpoint still loads with weights_only=True
+        if isinstance(self.net, GRUMatcher) and self.net.vocabulary is not None:
+            checkpoint[VOCABULARY_KEY] = list(self.net.vocabulary.words)
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        words = checkpoint.get(VOCABULARY_KEY)
+        if isinstance(self.net, GRUMatcher) and words is not None:
+            # setup() built the vocabulary from today's data: it must be the checkpoint's
+            self.net.set_vocabulary(words)
