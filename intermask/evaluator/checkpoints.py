@@ -14,7 +14,6 @@ shape-mismatched key instead of PyTorch's first-error message.
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import pickle
 from collections.abc import Mapping
@@ -25,11 +24,12 @@ from typing import Any
 import torch
 from torch import nn
 
+from intermask.utils.files import file_hash as file_hash  # re-exported
+
 log = logging.getLogger(__name__)
 
 INTERCLIP_PREFIX = "model."
 T2M_PARTS = ("movement_encoder", "text_encoder", "motion_encoder")
-HASH_CHARS = 16
 VOCABULARY_KEY = "evaluator_vocabulary"  # a GRU matcher's words, in our checkpoints
 
 
@@ -62,15 +62,6 @@ class KeyReport:
             )
             lines.append(f"shape mismatch ({len(self.mismatched)}): {shapes}")
         return "; ".join(lines) if lines else "all keys match"
-
-
-def file_hash(path: str | Path) -> str:
-    """sha256 of the file's bytes, first 16 hex digits (identifies the evaluator in results)."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as file:
-        for block in iter(lambda: file.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()[:HASH_CHARS]
 
 
 def read_checkpoint(path: str | Path, *, trusted: bool = False, map_location: str = "cpu") -> Any:
