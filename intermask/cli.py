@@ -101,6 +101,8 @@ def _frame_range(text: str) -> tuple[int, int]:
 
 
 def _generate(args: argparse.Namespace) -> int:
+    import torch
+
     from intermask import generate as gen
     from intermask.interm.load import load_generator
 
@@ -117,6 +119,10 @@ def _generate(args: argparse.Namespace) -> int:
     if args.reaction and args.edit:
         raise ValueError("--reaction and --edit are exclusive")
     generator = load_generator(args.checkpoint, vq_checkpoint=args.vq_checkpoint)
+    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    generator.net.to(device)
+    generator.vq.to(device)
+    generator.text.encoder.to(device)
     kind = gen.dataset_kind(generator)
     fps = args.fps or defaults["fps"]
     mode_iterations = defaults["reaction_iterations"] if args.reaction else defaults["iterations"]
@@ -202,6 +208,7 @@ def _add_generate_parser(commands) -> None:
         "--frames", dest="frames_range", type=_frame_range, help="edited frames A:B"
     )
     parser.add_argument("--person", type=int, choices=(1, 2), help="edit one person only")
+    parser.add_argument("--device", help="cpu, cuda, cuda:1 ... (default: cuda when available)")
     parser.add_argument("--out", help="output folder (default outputs/generate)")
     parser.add_argument("--no-render", action="store_true", help="write arrays and JSON only")
     parser.set_defaults(run=_generate)

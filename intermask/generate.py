@@ -182,7 +182,7 @@ def generate_samples(
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
     if reaction is not None or edit is not None:
-        source = reaction[None] if reaction is not None else edit[0]
+        source = (reaction[None] if reaction is not None else edit[0]).to(sampler.device)
         frames = source.shape[1]
         motion = normalize(generator, source)
         lengths = torch.full((motion.shape[0],), frames)
@@ -202,7 +202,8 @@ def generate_samples(
             kwargs["reference_tokens"] = fixed_tokens[0][None].expand(len(chunk), -1, -1)
         elif mode == "edit":
             tokens = fixed_tokens[None].expand(len(chunk), -1, -1, -1)
-            kwargs["edit"] = Edit(tokens, edit[1][None].expand_as(tokens))
+            region = edit[1].to(tokens.device)[None].expand_as(tokens)
+            kwargs["edit"] = Edit(tokens, region)
         use_text = None if all(t is None for t in texts) else [t or "" for t in texts]
         out = sampler(use_text, lengths, seeds=seeds, **kwargs)
         for i, (c, k) in enumerate(chunk):

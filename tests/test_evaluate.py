@@ -119,3 +119,30 @@ def test_generate_command_writes_samples(runs, tmp_path, capsys):
     assert seeds == [0, 1]
     out = capsys.readouterr().out
     assert "2 sample(s)" in out and "28 frames" in out
+
+
+def _features_file(tmp_path: Path) -> Path:
+    generator = np.random.default_rng(0)
+    path = tmp_path / "pair.npy"
+    np.save(path, (generator.standard_normal((2, 32, 262)) * 0.1).astype(np.float32))
+    return path
+
+
+@pytest.mark.parametrize("mode", ["reaction", "edit"])
+def test_generate_keeps_the_fixed_person(runs, tmp_path, mode, capsys):
+    motion = _features_file(tmp_path)
+    options = ["--reaction", str(motion)] if mode == "reaction" else ["--edit", str(motion)]
+    if mode == "edit":
+        options += ["--frames", "8:24", "--person", "2", "--text", "they wave"]
+    out = tmp_path / "out"
+    code = cli(
+        ["generate", "--checkpoint", str(runs["gen"]), *options, "--samples", "2"]
+        + ["--iterations", "2", "--no-render", "--out", str(out)]
+    )
+    assert code == 0, capsys.readouterr().err
+    first, second = (np.load(folder / "features.npy") for folder in sorted(out.iterdir()))
+    assert first.shape == second.shape == (2, 32, 262)
+    np.testing.assert_array_equal(first[0], second[0])  # person 1 is fixed: same tokens
+    assert not np.array_equal(first[1], second[1])  # person 2 follows each sample's seed
+    record = json.loads((sorted(out.iterdir())[0] / "sample.json").read_text())
+    assert record["mode"] == mode
