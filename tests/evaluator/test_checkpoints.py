@@ -9,8 +9,9 @@ import pickle
 import numpy as np
 import pytest
 import torch
-from conftest import (
+from evaluator_builders import (
     CAPTIONS,
+    TINY_GRU,
     TOKENS,
     WORDS,
     interhuman_batch,
@@ -96,8 +97,6 @@ def test_released_t2m_loads_with_glove(tmp_path):
     source = tiny_gru(seed=1)
     path = tmp_path / "finest.tar"
     _finest_tar(path, source)
-    from conftest import TINY_GRU
-
     from intermask.evaluator import GRUMatcher
 
     net = GRUMatcher(

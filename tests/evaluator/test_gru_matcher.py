@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from conftest import CAPTIONS, TOKENS, WORDS, interx_batch, tiny_gru
+from evaluator_builders import CAPTIONS, TOKENS, WORDS, interx_batch, tiny_gru
 from torch.nn.utils.rnn import pack_padded_sequence
 
 from intermask.evaluator import GRUMatcher

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from conftest import CAPTIONS, interhuman_batch, tiny_interclip
+from evaluator_builders import CAPTIONS, interhuman_batch, tiny_interclip
 
 from intermask.evaluator import InterCLIP
 from intermask.text import TINY_MODEL_NAME

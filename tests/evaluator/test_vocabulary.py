@@ -7,7 +7,7 @@ import pickle
 import numpy as np
 import pytest
 import torch
-from conftest import WORDS
+from evaluator_builders import WORDS
 
 from intermask.evaluator.vocabulary import POS_CLASSES, POS_INDEX, Vocabulary, load_glove
 

@@ -31,6 +31,7 @@ EXPERIMENTS = {
     "gen_ablation_no_interaction_masking": {"p_random": 1.0},
     "gen_ablation_no_step_unroll_no_interaction_masking": {"p_random": 1.0, "step_unroll": False},
 }
+CPU_SETTINGS = {"gen_demo"}  # CPU-sized: paper switches, not paper sizes (tested below)
 TINY_NET = {
     "codebook_size": 16,
     "width": 32,
@@ -55,7 +56,15 @@ def _compose(experiment: str):
 
 def test_every_gen_experiment_file_is_covered():
     files = {path.stem for path in Path(CONFIG_DIR, "experiment").glob("gen_*.yaml")}
-    assert files == set(EXPERIMENTS)
+    assert files == set(EXPERIMENTS) | CPU_SETTINGS
+
+
+def test_demo_setting_keeps_the_paper_switches_on_a_cpu_sized_network():
+    cfg = _compose("gen_demo")
+    landed = {key: cfg.model[key] if key in cfg.model else cfg.model.net[key] for key in PAPER}
+    assert landed == PAPER
+    assert cfg.trainer.accelerator == "cpu" and cfg.text.encoder.pretrained is None
+    assert cfg.model.net.text_dim == 64 and cfg.model.net.codebook_size == 512  # tiny text, vq_demo
 
 
 @pytest.mark.parametrize("experiment", sorted(EXPERIMENTS))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from conftest import Oracle, parts
+from reaction_builders import Oracle, parts
 
 from intermask.reaction.flow import (
     euler_step,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from conftest import Oracle, make_net, parts, standing_pair
+from reaction_builders import Oracle, make_net, parts, standing_pair
 
 from intermask.physics import penetration_loss
 from intermask.reaction.flow import euler_step

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from conftest import make_net
+from reaction_builders import make_net
 
 from intermask.reaction.network import attention_masks
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from conftest import make_net, parts, standing_pair
+from reaction_builders import make_net, parts, standing_pair
 
 from intermask.reaction.guidance import Guidance
 from intermask.reaction.sampler import generate_reaction, sample_reactions

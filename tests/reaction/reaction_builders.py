@@ -1,4 +1,4 @@
-"""Tiny ARFlow pieces shared by the reaction tests."""
+"""Tiny ARFlow pieces shared by the reaction tests (a uniquely named module: `conftest` names clash across test folders)."""
 
 from __future__ import annotations
 
