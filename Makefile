@@ -80,11 +80,14 @@ train-arflow: install ## train ARFlow reactions: make train-arflow [DATA=...] [A
 GEN_CKPT ?= $(shell ls -td outputs/train_gen/runs/*/ 2>/dev/null | head -n 1)
 EVAL_CKPT ?= $(shell ls -t outputs/train_evaluator/runs/*/checkpoints/best*.ckpt 2>/dev/null | head -n 1)
 MODE ?= interaction
+# reaction mode adds ARFlow's rows from the newest train_arflow run unless ARFLOW_CKPT is given (or empty)
+ARFLOW_CKPT ?= $(shell ls -td outputs/train_arflow/runs/*/ 2>/dev/null | head -n 1)
 
-eval: install ## the 20-replication protocol: make eval [GEN_CKPT=run] [EVAL_CKPT=ckpt] [DATA=...] [MODE=interaction|reaction|reconstruction] [ARGS="fast=true"]
+eval: install ## the 20-replication protocol: make eval [GEN_CKPT=run] [EVAL_CKPT=ckpt] [DATA=...] [MODE=interaction|reaction|reconstruction] [ARFLOW_CKPT=run] [ARGS="fast=true"]
 	@test -n "$(EVAL_CKPT)" || { echo "eval: no evaluator; run make train-evaluator or pass EVAL_CKPT=<ckpt>" >&2; exit 2; }
 	$(PY) -m intermask.evaluate $(DATA_ARG) mode=$(MODE) eval_ckpt=$(EVAL_CKPT) \
-		$(if $(filter reconstruction,$(MODE)),vq_ckpt=$(VQ_CKPT),gen_ckpt=$(GEN_CKPT)) $(ARGS)
+		$(if $(filter reconstruction,$(MODE)),vq_ckpt=$(VQ_CKPT),gen_ckpt=$(GEN_CKPT)) \
+		$(if $(and $(filter reaction,$(MODE)),$(ARFLOW_CKPT)),arflow_ckpt=$(ARFLOW_CKPT)) $(ARGS)
 
 DEMO_DIR ?= outputs/demo
 DEMO_PROMPTS := --text "two people shake hands" --text "one person pushes the other"
@@ -99,6 +102,7 @@ demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator,
 		eval_ckpt=$$(ls $(DEMO_DIR)/evaluator/checkpoints/best*.ckpt | head -n 1)
 	$(VENV)/bin/intermask generate --checkpoint $(DEMO_DIR)/gen $(DEMO_PROMPTS) --seconds 4 --samples 2 \
 		--out $(DEMO_DIR)/samples
+	@echo; cat $(DEMO_DIR)/eval/results.md
 	@echo; echo "demo done: table $(DEMO_DIR)/eval/results.md; checkpoints $(DEMO_DIR)/{evaluator,vq,gen}/checkpoints;" \
 		"samples $(DEMO_DIR)/samples/*/{animation.gif,viewer.html}; logs: make tb LOGDIR=$(DEMO_DIR)"
 

@@ -20,9 +20,11 @@ from omegaconf import DictConfig, OmegaConf
 from intermask.metrics.protocol import MotionSource, ProtocolConstants, ProtocolRunner
 from intermask.metrics.report import markdown_table, write_results
 from intermask.metrics.sources import (
+    ARFlowReaction,
     GroundTruth,
     InterMaskGeneration,
     InterMaskReaction,
+    Measured,
     VQReconstruction,
 )
 from intermask.train import CONFIG_DIR
@@ -46,9 +48,12 @@ def _on(batch: dict[str, Any], device: torch.device) -> dict[str, Any]:
 def build_sources(
     cfg: DictConfig, normalizer, device: torch.device
 ) -> tuple[list[MotionSource], dict[str, str]]:
-    """The rows after the GT row for ``cfg.mode`` -> (sources, {checkpoint role: 'path (hash)'})."""
-    from intermask.interm.load import load_generator
-    from intermask.interm.sampler import InteractionSampler
+    """The rows after the GT row for ``cfg.mode`` -> (sources, {checkpoint role: 'path (hash)'}).
+
+    interaction: InterMask from ``gen_ckpt``; reaction: InterMask's reaction mode from
+    ``gen_ckpt`` and / or ARFlow from ``arflow_ckpt`` (its steps, guidance and step-ablation
+    rows); reconstruction: the VQ-VAE of ``vq_ckpt``.
+    """
     from intermask.vq.load import load_vq
 
     checkpoints: dict[str, str] = {}
@@ -57,8 +62,24 @@ def build_sources(
             raise ValueError("mode=reconstruction needs vq_ckpt=<train_vq run>/checkpoints/*.ckpt")
         checkpoints["vq"] = f"{cfg.vq_ckpt} ({file_hash(cfg.vq_ckpt)})"
         return [VQReconstruction(vq=load_vq(cfg.vq_ckpt).to(device))], checkpoints
-    if not cfg.gen_ckpt:
-        raise ValueError(f"mode={cfg.mode} needs gen_ckpt=<train_gen run or .ckpt>")
+    arflow_ckpt = cfg.get("arflow_ckpt") if cfg.mode == "reaction" else None
+    if not cfg.gen_ckpt and not arflow_ckpt:
+        wanted = "gen_ckpt=<train_gen run or .ckpt>"
+        if cfg.mode == "reaction":
+            wanted += " and / or arflow_ckpt=<train_arflow run or .ckpt>"
+        raise ValueError(f"mode={cfg.mode} needs {wanted}")
+    sources: list[MotionSource] = []
+    if cfg.gen_ckpt:
+        sources += _intermask_rows(cfg, normalizer, device, checkpoints)
+    if arflow_ckpt:
+        sources += _arflow_rows(cfg, normalizer, device, checkpoints)
+    return sources, checkpoints
+
+
+def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[MotionSource]:
+    from intermask.interm.load import load_generator
+    from intermask.interm.sampler import InteractionSampler
+
     generator = load_generator(cfg.gen_ckpt, vq_checkpoint=cfg.vq_ckpt or None)
     checkpoints["generator"] = f"{generator.checkpoint} ({file_hash(generator.checkpoint)})"
     checkpoints["vq"] = f"{generator.vq_checkpoint} ({file_hash(generator.vq_checkpoint)})"
@@ -71,20 +92,64 @@ def build_sources(
     )
     generator.text.encoder.to(device)
     if cfg.mode == "interaction":
-        return [InterMaskGeneration(sampler=sampler)], checkpoints
-    reaction = InterMaskReaction(
-        sampler=sampler,
-        normalizer=normalizer,
-        iterations=cfg.reaction.iterations,
-        use_text=cfg.reaction.use_text,
+        return [InterMaskGeneration(sampler=sampler)]
+    return [
+        InterMaskReaction(
+            sampler=sampler,
+            normalizer=normalizer,
+            iterations=cfg.reaction.iterations,
+            use_text=cfg.reaction.use_text,
+        )
+    ]
+
+
+def _arflow_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[MotionSource]:
+    """ARFlow at ``arflow.steps`` with guidance (and without, for comparison), then the guided
+    sampling-step ablation rows."""
+    from intermask.reaction.guidance import Guidance
+    from intermask.reaction.load import load_arflow
+    from intermask.utils.files import resolve_checkpoint
+
+    settings = cfg.arflow
+    checkpoint = resolve_checkpoint(cfg.arflow_ckpt, kind="ARFlow")
+    checkpoints["arflow"] = f"{checkpoint} ({file_hash(checkpoint)})"
+    model = load_arflow(checkpoint).to(device)
+    guided = Guidance(**OmegaConf.to_container(settings.guidance))
+    plans = [(settings.steps, guided)]
+    if settings.compare_unguided and guided.mode != "none":
+        plans.insert(0, (settings.steps, Guidance.off(beta=guided.beta)))
+    plans += [(steps, guided) for steps in settings.step_ablation if steps != settings.steps]
+    return [
+        ARFlowReaction(
+            model=model,
+            normalizer=normalizer,
+            steps=int(steps),
+            guidance=guidance,
+            use_text=settings.use_text,
+        )
+        for steps, guidance in plans
+    ]
+
+
+def measured(cfg: DictConfig, source: MotionSource, *, latency: bool = True) -> MotionSource:
+    """``source`` with the penetration (``cfg.penetration``) and latency columns."""
+    settings = cfg.penetration
+    return Measured(
+        source,
+        penetration=cfg.mode in settings.modes,
+        latency=latency,
+        pitch=settings.pitch,
+        tolerance=settings.tolerance,
     )
-    return [reaction], checkpoints
 
 
 def evaluate(cfg: DictConfig) -> dict[str, Any]:
     """Run the protocol of ``cfg`` -> the result dictionary (also written to the run folder)."""
     if cfg.mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {cfg.mode!r}")
+    unknown = sorted(set(cfg.penetration.modes) - set(MODES))
+    if unknown:
+        raise ValueError(f"penetration.modes: unknown mode(s) {unknown}; expected some of {MODES}")
     output_dir = Path(cfg.paths.output_dir)
     write_run_record(output_dir, cfg, extra={"job": cfg.task_name})
     constants: ProtocolConstants = instantiate(cfg.protocol)
@@ -105,11 +170,15 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         for batch in datamodule.eval_dataloader(cfg.split, epoch=epoch):
             yield _on(batch, device)
 
+    ground_truth = GroundTruth(normalizer=datamodule.normalizer)
     runner = ProtocolRunner(
         loader=loader,
         evaluator=evaluator,
-        ground_truth=GroundTruth(normalizer=datamodule.normalizer),
-        sources=[GroundTruth(normalizer=datamodule.normalizer), *sources],
+        ground_truth=ground_truth,
+        sources=[
+            measured(cfg, ground_truth, latency=False),
+            *(measured(cfg, source) for source in sources),
+        ],
         constants=constants,
         multimodality=not cfg.fast,
         generation_batch_size=cfg.generation_batch_size,
@@ -124,6 +193,12 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         "evaluator": f"{evaluator.name} ({cfg.eval_ckpt}, sha256 {evaluator.file_hash})",
         **checkpoints,
         "sampler": dict(OmegaConf.to_container(cfg.sampler)),
+        **(
+            {"arflow_sampling": dict(OmegaConf.to_container(cfg.arflow))}
+            if "arflow" in checkpoints
+            else {}
+        ),
+        "penetration": dict(OmegaConf.to_container(cfg.penetration)),
         "device": str(device),
     }
     result = runner.run(header)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import open_dict
+from test_train_arflow import _config as arflow_config
 from test_train_evaluator import TINY_INTERCLIP
 from test_train_evaluator import _config as evaluator_config
 from test_train_gen import _gen_config
@@ -28,10 +29,13 @@ def runs(synthetic_interhuman_root, tmp_path_factory) -> dict[str, Path]:
     train(_gen_config(synthetic_interhuman_root, vq_ckpt, root / "gen"))
     train(evaluator_config("synthetic", synthetic_interhuman_root, root / "ev", TINY_INTERCLIP))
     evaluator = sorted((root / "ev" / "checkpoints").glob("best*.ckpt"))[0]
-    return {"vq": vq_ckpt, "gen": root / "gen", "evaluator": evaluator}
+    train(arflow_config("synthetic", synthetic_interhuman_root, root / "arflow"))
+    return {"vq": vq_ckpt, "gen": root / "gen", "evaluator": evaluator, "arflow": root / "arflow"}
 
 
-def _eval_config(data_root: Path, runs: dict[str, Path], out: Path, mode: str):
+def _eval_config(
+    data_root: Path, runs: dict[str, Path], out: Path, mode: str, extra: tuple[str, ...] = ()
+):
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(
             "eval",
@@ -50,6 +54,9 @@ def _eval_config(data_root: Path, runs: dict[str, Path], out: Path, mode: str):
                 "protocol.diversity_pairs=8",
                 "sampler.iterations=2",
                 "reaction.iterations=2",
+                "penetration.modes=[interaction,reaction,reconstruction]",
+                "penetration.pitch=0.05",  # 5 cm voxels: untrained models overlap a lot
+                *extra,
             ],
         )
     with open_dict(cfg):
@@ -72,6 +79,8 @@ def test_eval_job_writes_the_table(synthetic_interhuman_root, runs, tmp_path, mo
         assert len(row["fid"]["values"]) == 2 and row["diversity"]["mean"] > 0
     assert "multimodality" not in model  # fast mode
     assert (mode == "reconstruction") == ("mpjpe_mm" in model)
+    assert truth["if"]["mean"] >= 0 and model["iv_cm3"]["mean"] >= 0  # penetration on every row
+    assert "latency_ms" in model and "latency_ms" not in truth
     header = result["header"]
     assert header["fast"] and header["evaluator"].startswith("interclip[trained:synthetic]")
     assert len(header["constants"]) > 10 and header["mode"] == mode
@@ -82,6 +91,52 @@ def test_eval_job_writes_the_table(synthetic_interhuman_root, runs, tmp_path, mo
     )
     assert list((tmp_path / "tensorboard").glob("events.out.tfevents.*"))
     assert "| Ground Truth |" in capsys.readouterr().out
+
+
+def test_reaction_table_compares_intermask_and_arflow(synthetic_interhuman_root, runs, tmp_path):
+    overrides = (
+        f"arflow_ckpt={runs['arflow']}",
+        "arflow.steps=2",
+        "arflow.step_ablation=[1,2,3]",
+        "fast_replications=1",
+    )
+    cfg = _eval_config(synthetic_interhuman_root, runs, tmp_path, "reaction", overrides)
+    result = evaluate(cfg)
+    rows = result["rows"]
+    assert list(rows) == [
+        "Ground Truth",
+        "InterMask (reaction)",
+        "ARFlow (2 steps)",
+        "ARFlow + guidance (2 steps)",
+        "ARFlow + guidance (1 step)",
+        "ARFlow + guidance (3 steps)",
+    ]
+    for name, row in rows.items():
+        assert row["iv_cm3"]["mean"] >= 0 and 0 <= row["if"]["mean"] <= 1
+        assert ("latency_ms" in row) == (name != "Ground Truth")
+    # more Euler steps cost more network calls
+    assert (
+        rows["ARFlow + guidance (3 steps)"]["latency_ms"]["mean"]
+        > (rows["ARFlow + guidance (1 step)"]["latency_ms"]["mean"])
+    )
+    header = result["header"]
+    assert header["arflow_sampling"]["guidance"]["mode"] == "improved"
+    assert header["arflow"].startswith(str(runs["arflow"] / "checkpoints" / "last.ckpt"))
+    assert "| ARFlow + guidance (2 steps) |" in (tmp_path / "results.md").read_text()
+    assert "Latency (ms/sample)" in (tmp_path / "results.md").read_text()
+
+
+def test_reaction_mode_needs_a_model_and_known_penetration_modes(
+    synthetic_interhuman_root, runs, tmp_path
+):
+    cfg = _eval_config(synthetic_interhuman_root, runs, tmp_path, "reaction", ("gen_ckpt=null",))
+    with pytest.raises(ValueError, match="mode=reaction needs gen_ckpt=.* and / or arflow_ckpt="):
+        evaluate(cfg)
+    cfg = _eval_config(
+        synthetic_interhuman_root, runs, tmp_path, "reaction", ("penetration.modes=[reactions]",)
+    )
+    with pytest.raises(ValueError, match=r"penetration.modes: unknown mode\(s\) \['reactions'\]"):
+        evaluate(cfg)
 
 
 def test_generate_command_writes_samples(runs, tmp_path, capsys):

@@ -19,6 +19,7 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("mpjpe_mm", "MPJPE (mm)", "↓"),
     ("iv_cm3", "IV (cm³)", "↓"),
     ("if", "IF", "↓"),
+    ("latency_ms", "Latency (ms/sample)", "↓"),
 )
 
 

@@ -1,7 +1,11 @@
-"""Rows of the evaluation table: ground truth, InterMask interaction / reaction generation and
-VQ-VAE reconstruction, each turning an eval batch into de-normalized two-person motion."""
+"""Rows of the evaluation table: ground truth, InterMask interaction / reaction generation,
+ARFlow reactions and VQ-VAE reconstruction, each turning an eval batch into de-normalized
+two-person motion; :class:`Measured` adds penetration and latency to any of them."""
 
 from __future__ import annotations
+
+import time
+from typing import Any
 
 import torch
 from einops import rearrange
@@ -10,6 +14,12 @@ from intermask.data.normalization import Normalizer
 from intermask.interm.sampler import FRAMES_PER_STEP, InteractionSampler, joints_from_features
 from intermask.metrics.mpjpe import MPJPE
 from intermask.metrics.protocol import Batch, MotionSource
+from intermask.motion import interhuman as ih
+from intermask.motion import interx as ix
+from intermask.physics.volume import DEFAULT_PITCH, DEFAULT_TOLERANCE, intersection_volume
+from intermask.reaction.guidance import Guidance
+from intermask.reaction.roles import actor_index
+from intermask.reaction.sampler import sample_reactions
 from intermask.vq.model import MotionVQVAE
 
 
@@ -130,3 +140,122 @@ class VQReconstruction(MotionSource):
         if int(self.mpjpe.count) == 0:
             return {}
         return {"mpjpe_mm": float(self.mpjpe.compute())}
+
+
+class ARFlowReaction(MotionSource):
+    """ARFlow reactions: the ODE transports the actor's motion to the reactor's (ARFlow eq. 9).
+
+    The actor is the batch's annotation (``batch["actor"]``; person 1 without it), as ARFlow is
+    trained; the evaluator sees the GT actor with the generated reactor in the batch's person
+    order. Sampling is deterministic unless ``guidance.beta`` > 0, so MultiModality applies only
+    to stochastic sampling.
+    """
+
+    def __init__(
+        self,
+        *,
+        model: Any,
+        normalizer: Normalizer | None,
+        steps: int,
+        guidance: Guidance,
+        use_text: bool = True,
+        name: str | None = None,
+    ) -> None:
+        self.model, self.normalizer, self.steps, self.guidance = model, normalizer, steps, guidance
+        self.use_text = use_text
+        self.generates = guidance.beta > 0
+        guided = guidance.mode != "none" and guidance.lambda_pene > 0
+        plural = "" if steps == 1 else "s"
+        self.name = name or f"ARFlow{' + guidance' if guided else ''} ({steps} step{plural})"
+
+    def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        inputs = batch if self.use_text else {k: v for k, v in batch.items() if k != "caption"}
+        sample = sample_reactions(
+            self.model, inputs, steps=self.steps, guidance=self.guidance, seeds=seeds
+        )
+        motion = batch["motion"].to(sample.features.device).float()
+        if self.normalizer is not None:
+            motion = self.normalizer.denormalize(motion)
+        actor = actor_index(batch).to(motion.device)
+        rows = torch.arange(motion.shape[0], device=motion.device)
+        pair = motion.clone()
+        pair[rows, 1 - actor] = sample.features.to(pair.dtype)
+        return pair, batch["length"]
+
+
+def feature_joints(features: torch.Tensor) -> torch.Tensor:
+    """(..., T, *F) de-normalized InterHuman (262) or Inter-X (56, 6) features -> (..., T, 22, 3)
+    joint positions in metres (Inter-X through the template skeleton, Z-up raw frame)."""
+    if features.shape[-1] == ih.FEATURE_DIM:
+        return ih.features_to_positions(features)
+    if tuple(features.shape[-2:]) == (ix.NUM_ROWS, ix.RAW_CHANNELS):
+        return ix.interx_positions(features, up_axis="z")
+    raise ValueError(
+        f"no joint positions for features of shape {tuple(features.shape)}: expected (..., T, "
+        f"{ih.FEATURE_DIM}) InterHuman or (..., T, {ix.NUM_ROWS}, {ix.RAW_CHANNELS}) Inter-X"
+    )
+
+
+class Measured(MotionSource):
+    """A row plus its Intersection Volume (cm^3 per frame), Intersection Frequency (share of
+    frames over ``tolerance`` cm^3) and, with ``latency``, the wall time of the row's call per
+    sample (ms; batches of the protocol's eval batch size) over the evaluation pass (ARFlow
+    section 4.1; capsule proxy of :mod:`intermask.physics`).
+
+    Only the evaluation pass counts: measurement stops at ``extra_metrics`` (read after that
+    pass) and restarts at ``reset`` (before the next), so MultiModality batches do not enter.
+    """
+
+    def __init__(
+        self,
+        source: MotionSource,
+        *,
+        penetration: bool = True,
+        latency: bool = True,
+        pitch: float = DEFAULT_PITCH,
+        tolerance: float = DEFAULT_TOLERANCE,
+    ) -> None:
+        self.source, self.penetration, self.latency = source, penetration, latency
+        self.pitch, self.tolerance = pitch, tolerance
+        self.name, self.generates = source.name, source.generates
+        self.reset()
+
+    def reset(self) -> None:
+        self.source.reset()
+        self._measuring = True
+        self._volume = self._hits = self._frames = 0.0
+        self._seconds, self._samples = 0.0, 0
+
+    def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        start = time.perf_counter()
+        motion, lengths = self.source(batch, seeds)
+        if self._measuring:
+            if motion.is_cuda:
+                torch.cuda.synchronize(motion.device)
+            self._seconds += time.perf_counter() - start
+            self._samples += motion.shape[0]
+            if self.penetration:
+                self._measure_penetration(motion, lengths)
+        return motion, lengths
+
+    @torch.no_grad()
+    def _measure_penetration(self, motion: torch.Tensor, lengths: torch.Tensor) -> None:
+        joints = feature_joints(motion.float())  # (B, 2, T, 22, 3)
+        lengths = lengths.to(joints.device)
+        valid = torch.arange(joints.shape[2], device=joints.device)[None, :] < lengths[:, None]
+        volume = intersection_volume(
+            joints[:, 0], joints[:, 1], pitch=self.pitch, frame_mask=valid
+        )[valid]
+        self._volume += float(volume.double().sum())
+        self._hits += float((volume > self.tolerance).sum())
+        self._frames += float(volume.numel())
+
+    def extra_metrics(self) -> dict[str, float]:
+        self._measuring = False
+        values = dict(self.source.extra_metrics())
+        if self.penetration and self._frames:
+            values["iv_cm3"] = self._volume / self._frames
+            values["if"] = self._hits / self._frames
+        if self.latency and self._samples:
+            values["latency_ms"] = 1000.0 * self._seconds / self._samples
+        return values

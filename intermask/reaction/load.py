@@ -1,0 +1,37 @@
+"""Rebuild a trained ARFlow model from a train_arflow run (evaluation and scripts)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
+
+from intermask.reaction.module import ARFlowModule
+from intermask.utils.files import resolve_checkpoint
+
+
+def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowModule:
+    """The frozen (eval) ARFlowModule of a ``train_arflow`` run.
+
+    checkpoint: ``<run>/checkpoints/<name>.ckpt`` or the run directory (its last.ckpt). The
+    module is rebuilt from ``<run>/config.yaml`` (network, representation, text tower) and its
+    weights and normalization statistics are loaded strictly.
+    """
+    checkpoint = resolve_checkpoint(checkpoint, kind="ARFlow")
+    config_path = checkpoint.parent.parent / "config.yaml"
+    if not config_path.is_file():
+        raise FileNotFoundError(
+            f"{config_path}: the run config of the ARFlow checkpoint is missing "
+            f"(expected <run>/config.yaml beside <run>/checkpoints/)"
+        )
+    model_config = OmegaConf.load(config_path).get("model")
+    if model_config is None or not str(model_config.get("_target_", "")).endswith("ARFlowModule"):
+        raise ValueError(
+            f"{config_path}: not a train_arflow run config (model is not ARFlowModule)"
+        )
+    module: ARFlowModule = instantiate(model_config)
+    state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
+    module.load_state_dict(state)
+    return module.eval().requires_grad_(False)
