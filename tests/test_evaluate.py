@@ -201,3 +201,14 @@ def test_generate_keeps_the_fixed_person(runs, tmp_path, mode, capsys):
     assert not np.array_equal(first[1], second[1])  # person 2 follows each sample's seed
     record = json.loads((sorted(out.iterdir())[0] / "sample.json").read_text())
     assert record["mode"] == mode
+
+
+def test_demo_protocol_setting():
+    """`make demo` evaluates with experiment=eval_demo: the synthetic protocol, fewer replications."""
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose("eval", overrides=["experiment=eval_demo", "eval_ckpt=e.ckpt"])
+    assert cfg.protocol.eval_batch_size == 32 and cfg.protocol.replications == 5
+    assert cfg.data.max_length == 96 and cfg.sampler.iterations == 10  # gen_demo's crop length
+    assert cfg.protocol.mm_replications == 1 and cfg.data.synthesize_if_missing
+    assert cfg.penetration.modes == ["reaction"] and cfg.arflow.steps == 5
+    assert list(cfg.arflow.step_ablation) == [2, 10]

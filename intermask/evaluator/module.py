@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, Literal
 
 import lightning as L
 import torch
 from torch.optim import Optimizer
-from torch.optim.lr_scheduler import LambdaLR
 
 from intermask.data.normalization import Normalizer
 from intermask.evaluator.checkpoints import VOCABULARY_KEY
@@ -17,6 +16,7 @@ from intermask.evaluator.gru_matcher import GRUMatcher
 from intermask.evaluator.interclip import InterCLIP
 from intermask.evaluator.losses import RetrievalAccuracy, clip_loss, margin_loss
 from intermask.evaluator.vocabulary import Vocabulary
+from intermask.utils.schedules import warmup_multistep_optimizers
 
 log = logging.getLogger(__name__)
 LossKind = Literal["clip", "margin"]
@@ -40,8 +40,9 @@ class EvaluatorModule(L.LightningModule):
         retrieval_group_size: R-precision groups for validation (protocol eval batch).
         min_word_count: words seen fewer times in the training split map to ``unk`` (learned
             GRU vocabulary only).
-        warmup_steps: linear learning-rate warm-up over this many optimizer steps, then
-            constant (0: constant from the start, as T2M trains its matcher).
+        warmup_fraction, lr_milestones, lr_gamma: the project's warm-up multistep schedule
+            (fractions of all optimizer steps); the defaults keep the learning rate constant,
+            as T2M trains its matcher.
     """
 
     def __init__(
@@ -54,7 +55,9 @@ class EvaluatorModule(L.LightningModule):
         margin: float = 10.0,
         retrieval_group_size: int = 96,
         min_word_count: int = 1,
-        warmup_steps: int = 0,
+        warmup_fraction: float = 0.0,
+        lr_milestones: Sequence[float] = (),
+        lr_gamma: float = 1.0,
     ) -> None:
         super().__init__()
         if loss not in ("clip", "margin"):
@@ -72,7 +75,9 @@ class EvaluatorModule(L.LightningModule):
                 "trained_on": str(trained_on),
                 "retrieval_group_size": int(retrieval_group_size),
                 "min_word_count": int(min_word_count),
-                "warmup_steps": int(warmup_steps),
+                "warmup_fraction": float(warmup_fraction),
+                "lr_milestones": [float(m) for m in lr_milestones],
+                "lr_gamma": float(lr_gamma),
             },
             logger=False,
         )
@@ -153,12 +158,17 @@ class EvaluatorModule(L.LightningModule):
             self.log(f"val/{name}", value, prog_bar=name == "top3")
 
     def configure_optimizers(self) -> dict[str, Any]:
-        optimizer = self.optimizer_factory(params=[p for p in self.parameters() if p.requires_grad])
-        warmup = self.hparams.warmup_steps
-        schedule = LambdaLR(
-            optimizer, lambda step: min(1.0, (step + 1) / warmup) if warmup else 1.0
+        def trainable_only(params: Iterable[torch.nn.Parameter]) -> Optimizer:
+            # the frozen CLIP embeddings never reach the optimizer (nor its weight decay)
+            return self.optimizer_factory(params=[p for p in params if p.requires_grad])
+
+        return warmup_multistep_optimizers(
+            self,
+            trainable_only,
+            warmup_fraction=self.hparams.warmup_fraction,
+            milestones=self.hparams.lr_milestones,
+            gamma=self.hparams.lr_gamma,
         )
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": schedule, "interval": "step"}}
 
     # ------------------------------------------------------------------ checkpoints
 

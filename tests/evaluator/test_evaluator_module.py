@@ -26,18 +26,25 @@ def test_loss_must_fit_the_network():
         EvaluatorModule(net=tiny_gru(), optimizer=ADAM, loss="hinge", trained_on="x")
 
 
-def test_warmup_then_constant_and_frozen_embeddings_are_not_optimized():
+def test_schedule_and_frozen_embeddings_are_not_optimized():
     module = EvaluatorModule(
-        net=tiny_interclip(), optimizer=ADAM, loss="clip", trained_on="x", warmup_steps=4
+        net=tiny_interclip(),
+        optimizer=ADAM,
+        loss="clip",
+        trained_on="x",
+        warmup_fraction=0.4,
+        lr_milestones=[0.8],
+        lr_gamma=0.5,
     )
+    module._trainer = SimpleNamespace(estimated_stepping_batches=10)
     config = module.configure_optimizers()
     optimizer, schedule = config["optimizer"], config["lr_scheduler"]["scheduler"]
     rates = []
-    for _ in range(6):
+    for _ in range(10):
         rates.append(optimizer.param_groups[0]["lr"])
         optimizer.step()
         schedule.step()
-    assert rates == pytest.approx([0.025, 0.05, 0.075, 0.1, 0.1, 0.1])
+    assert rates == pytest.approx([0.025, 0.05, 0.075, 0.1, 0.1, 0.1, 0.1, 0.1, 0.05, 0.05])
     optimized = {id(p) for group in optimizer.param_groups for p in group["params"]}
     assert id(module.net.token_embedding.weight) not in optimized
     assert id(module.net.latent_scale) in optimized
