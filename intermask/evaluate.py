@@ -118,7 +118,8 @@ def _arflow_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Motio
     plans = [(settings.steps, guided)]
     if settings.compare_unguided and guided.mode != "none":
         plans.insert(0, (settings.steps, Guidance.off(beta=guided.beta)))
-    plans += [(steps, guided) for steps in settings.step_ablation if steps != settings.steps]
+    ablation = dict.fromkeys(int(steps) for steps in settings.step_ablation)  # ordered, unique
+    plans += [(steps, guided) for steps in ablation if steps != settings.steps]
     return [
         ARFlowReaction(
             model=model,

@@ -21,6 +21,19 @@ def test_paper_configuration_has_about_54m_parameters():
     assert (total, text) == (54_272_896, 11_027_968)
 
 
+def test_paper_configuration_runs_a_300_frame_pair():
+    """T = 300 frames -> 75 token steps x 5 rows per person: a 2 x 375 + [SEP] = 751-token
+    sequence, with one clip of the batch shorter (padding)."""
+    torch.manual_seed(0)
+    model = InterMTransformer().eval()
+    tokens = torch.randint(0, 1024, (2, 2, 5, 75))
+    text = TextFeatures(torch.randn(2, 9, 768), torch.tensor([8, 5]))
+    with torch.no_grad():
+        out = model(tokens[:, 0], tokens[:, 1], text, torch.tensor([75, 60]))
+    assert out.logits_a.shape == out.logits_b.shape == (2, 5, 75, 1024)
+    assert torch.isfinite(out.logits_a).all() and torch.isfinite(out.logits_b).all()
+
+
 def test_logits_have_per_person_shapes_and_no_nan_with_padding(build):
     model = build.model()
     a, b = build.tokens(3, STEPS)

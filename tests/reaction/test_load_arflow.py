@@ -20,8 +20,6 @@ def test_missing_checkpoint_and_run_config_are_named(tmp_path):
 def test_a_run_of_another_job_is_refused(tmp_path):
     (tmp_path / "checkpoints").mkdir()
     (tmp_path / "checkpoints" / "last.ckpt").write_bytes(b"")
-    (tmp_path / "config.yaml").write_text(
-        "model:\n  _target_: intermask.vq.module.VQVAEModule\n"
-    )
+    (tmp_path / "config.yaml").write_text("model:\n  _target_: intermask.vq.module.VQVAEModule\n")
     with pytest.raises(ValueError, match="not a train_arflow run config"):
         load_arflow(tmp_path / "checkpoints" / "last.ckpt")
