@@ -23,6 +23,7 @@ from intermask.evaluator.frozen import FrozenEvaluator
 from intermask.evaluator.gru_matcher import GRUMatcher
 from intermask.evaluator.interclip import InterCLIP
 from intermask.evaluator.vocabulary import DEFAULT_GLOVE_PREFIX
+from intermask.utils.files import run_config_path
 
 log = logging.getLogger(__name__)
 
@@ -53,8 +54,8 @@ def load_evaluator(
     """
     path = Path(path)
     checkpoint = read_checkpoint(path, trusted=trusted, map_location=map_location)
-    config_path = path.parent.parent / "config.yaml"
-    if isinstance(checkpoint, dict) and _is_our_run(checkpoint, config_path):
+    if isinstance(checkpoint, dict) and _is_our_run(checkpoint):
+        config_path = run_config_path(path, kind="evaluator")
         if net is not None:
             raise ValueError(
                 f"{path}: a train_evaluator checkpoint rebuilds its own network; drop net"
@@ -74,7 +75,7 @@ def load_evaluator(
         keys = sorted(map(str, checkpoint))[:10] if isinstance(checkpoint, dict) else []
         raise ValueError(
             f"{path}: not an evaluator checkpoint: expected a train_evaluator checkpoint (with "
-            f"{config_path}), InterGen's interclip.ckpt ('state_dict' with 'model.' keys) or a "
+            f"{path.parent.parent / 'config.yaml'}), InterGen's interclip.ckpt ('state_dict' with 'model.' keys) or a "
             f"T2M finest.tar (movement_encoder/text_encoder/motion_encoder); top-level keys {keys}"
         )
     evaluator = FrozenEvaluator(
@@ -84,16 +85,9 @@ def load_evaluator(
     return evaluator
 
 
-def _is_our_run(checkpoint: dict[str, Any], config_path: Path) -> bool:
+def _is_our_run(checkpoint: dict[str, Any]) -> bool:
     state = checkpoint.get("state_dict")
-    if not isinstance(state, dict) or not any(k.startswith("net.") for k in state):
-        return False
-    if not config_path.is_file():
-        raise FileNotFoundError(
-            f"{config_path}: the run config of the evaluator checkpoint is missing "
-            "(expected <run>/config.yaml beside <run>/checkpoints/)"
-        )
-    return True
+    return isinstance(state, dict) and any(k.startswith("net.") for k in state)
 
 
 def _from_run(

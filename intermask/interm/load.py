@@ -11,7 +11,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from intermask.interm.model import InterMTransformer
 from intermask.text.cache import TextFeatureCache
-from intermask.utils.files import resolve_checkpoint
+from intermask.utils.files import resolve_checkpoint, run_config_path
 from intermask.vq.load import load_vq
 from intermask.vq.model import MotionVQVAE
 
@@ -35,12 +35,7 @@ def load_generator(
     (its last.ckpt). The transformer is rebuilt from ``<run>/config.yaml`` and loaded strictly;
     the VQ-VAE comes from the run's ``vq_ckpt`` unless ``vq_checkpoint`` overrides it."""
     checkpoint = resolve_checkpoint(checkpoint, kind="generator")
-    config_path = checkpoint.parent.parent / "config.yaml"
-    if not config_path.is_file():
-        raise FileNotFoundError(
-            f"{config_path}: the run config of the generator checkpoint is missing "
-            f"(expected <run>/config.yaml beside <run>/checkpoints/)"
-        )
+    config_path = run_config_path(checkpoint, kind="generator")
     config = OmegaConf.load(config_path)
     if "vq_ckpt" not in config or "net" not in config.get("model", {}):
         raise ValueError(f"{config_path}: not a train_gen run config (no vq_ckpt / model.net)")

@@ -9,7 +9,7 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from intermask.reaction.module import ARFlowModule
-from intermask.utils.files import resolve_checkpoint
+from intermask.utils.files import resolve_checkpoint, run_config_path
 
 
 def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowModule:
@@ -20,12 +20,7 @@ def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowM
     weights and normalization statistics are loaded strictly.
     """
     checkpoint = resolve_checkpoint(checkpoint, kind="ARFlow")
-    config_path = checkpoint.parent.parent / "config.yaml"
-    if not config_path.is_file():
-        raise FileNotFoundError(
-            f"{config_path}: the run config of the ARFlow checkpoint is missing "
-            f"(expected <run>/config.yaml beside <run>/checkpoints/)"
-        )
+    config_path = run_config_path(checkpoint, kind="ARFlow")
     model_config = OmegaConf.load(config_path).get("model")
     if model_config is None or not str(model_config.get("_target_", "")).endswith("ARFlowModule"):
         raise ValueError(

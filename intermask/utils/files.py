@@ -34,3 +34,15 @@ def resolve_checkpoint(path: str | Path, *, kind: str) -> Path:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: {kind} checkpoint not found")
     return path
+
+
+def run_config_path(checkpoint: Path, *, kind: str) -> Path:
+    """``<run>/config.yaml`` of ``<run>/checkpoints/<name>.ckpt``; a missing one is an error
+    naming ``kind`` (e.g. "VQ") and where the file was expected."""
+    config_path = checkpoint.parent.parent / "config.yaml"
+    if not config_path.is_file():
+        raise FileNotFoundError(
+            f"{config_path}: the run config of the {kind} checkpoint is missing "
+            "(expected <run>/config.yaml beside <run>/checkpoints/)"
+        )
+    return config_path

@@ -8,6 +8,7 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
+from intermask.utils.files import run_config_path
 from intermask.vq.model import MotionVQVAE
 
 
@@ -20,12 +21,7 @@ def load_vq(checkpoint: str | Path, *, map_location: str = "cpu") -> MotionVQVAE
     checkpoint = Path(checkpoint)
     if not checkpoint.is_file():
         raise FileNotFoundError(f"{checkpoint}: VQ checkpoint not found")
-    config_path = checkpoint.parent.parent / "config.yaml"
-    if not config_path.is_file():
-        raise FileNotFoundError(
-            f"{config_path}: the run config of the VQ checkpoint is missing "
-            f"(expected <run>/config.yaml beside <run>/checkpoints/)"
-        )
+    config_path = run_config_path(checkpoint, kind="VQ")
     net = instantiate(OmegaConf.load(config_path).model.net)
     state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
     net.load_state_dict(
