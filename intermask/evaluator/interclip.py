@@ -28,6 +28,7 @@ from einops import rearrange
 from torch import nn
 
 from intermask.text.clip_encoder import FrozenCLIPTextEncoder, register_model_configs
+from intermask.utils.layers import post_norm_gelu_encoder
 
 FOOT_CONTACT_DIMS = 4  # the last 4 of the 262 InterHuman features (InterGen drops them)
 FEATURE_DIM = 262
@@ -60,20 +61,6 @@ class PositionalEncoding(nn.Module):
         return self.dropout(x + self.pe[None, : x.shape[1]].to(x.dtype))
 
 
-def _encoder(*, width: int, layers: int, heads: int, ff: int, dropout: float) -> nn.Module:
-    """Post-norm GELU TransformerEncoder, batch first (the reference's layer settings)."""
-    layer = nn.TransformerEncoderLayer(
-        d_model=width,
-        nhead=heads,
-        dim_feedforward=ff,
-        dropout=dropout,
-        activation="gelu",
-        batch_first=True,
-        norm_first=False,
-    )
-    return nn.TransformerEncoder(layer, num_layers=layers, enable_nested_tensor=False)
-
-
 class InterCLIPMotionEncoder(nn.Module):
     """(B, T, motion_dim) frames + (B,) lengths -> (B, embed_dim) un-normalized embedding."""
 
@@ -93,7 +80,9 @@ class InterCLIPMotionEncoder(nn.Module):
         self.query_token = nn.Parameter(torch.randn(1, width))
         self.embed_motion = nn.Linear(motion_dim, width)
         self.sequence_pos_encoder = PositionalEncoding(dim=width, max_len=max_len, dropout=dropout)
-        self.transformer = _encoder(width=width, layers=layers, heads=heads, ff=ff, dropout=dropout)
+        self.transformer = post_norm_gelu_encoder(
+            width=width, layers=layers, heads=heads, ff=ff, dropout=dropout
+        )
         self.out_ln = nn.LayerNorm(width)
         self.out = nn.Linear(width, embed_dim)
 
@@ -205,7 +194,7 @@ class InterCLIP(nn.Module):
         # frozen CLIP embeddings (the reference encodes them under no_grad)
         self.token_embedding.requires_grad_(False)
         self.positional_embedding.requires_grad_(False)
-        self.textTransEncoder = _encoder(
+        self.textTransEncoder = post_norm_gelu_encoder(
             width=text_width, layers=text_layers, heads=text_heads, ff=text_ff, dropout=text_dropout
         )
         self.text_ln = nn.LayerNorm(text_width)

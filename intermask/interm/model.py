@@ -26,6 +26,7 @@ from intermask.interm.attention import MultiHeadAttention
 from intermask.interm.blocks import AdaLNModulation, InterMBlock, adaptive_norm, modulate
 from intermask.interm.position import add_grid_encoding
 from intermask.interm.tokens import Vocabulary, build_sequence, sequence_padding_mask, split_persons
+from intermask.utils.layers import post_norm_gelu_encoder
 
 MODELINGS = ("collaborative", "alternative")  # Table 3: ours vs the appendix E ablation
 
@@ -141,17 +142,8 @@ class InterMTransformer(nn.Module):
         self.token_projection = nn.Linear(token_embed_dim, width)
         self.input_dropout = nn.Dropout(dropout)
 
-        text_layer = nn.TransformerEncoderLayer(
-            d_model=text_dim,
-            nhead=text_heads,
-            dim_feedforward=text_ff,
-            dropout=text_dropout,
-            activation="gelu",
-            batch_first=True,
-            norm_first=False,
-        )
-        self.text_encoder = nn.TransformerEncoder(
-            text_layer, num_layers=text_layers, enable_nested_tensor=False
+        self.text_encoder = post_norm_gelu_encoder(
+            width=text_dim, layers=text_layers, heads=text_heads, ff=text_ff, dropout=text_dropout
         )
         self.text_norm = nn.LayerNorm(text_dim)
         # A dropped condition is the projection of a zero text feature, i.e. this layer's
