@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
-import lightning as L
 import torch
 from torch.optim import Optimizer
 
@@ -16,13 +15,13 @@ from intermask.evaluator.gru_matcher import GRUMatcher
 from intermask.evaluator.interclip import InterCLIP
 from intermask.evaluator.losses import RetrievalAccuracy, clip_loss, margin_loss
 from intermask.evaluator.vocabulary import Vocabulary
-from intermask.utils.schedules import warmup_multistep_optimizers
+from intermask.utils.lightning import ScheduledModule
 
 log = logging.getLogger(__name__)
 LossKind = Literal["clip", "margin"]
 
 
-class EvaluatorModule(L.LightningModule):
+class EvaluatorModule(ScheduledModule):
     """Trains :class:`InterCLIP` or :class:`GRUMatcher` on interaction batches.
 
     Batch: ``motion`` (B, 2, T, *F) as the datamodule gives it (normalized or not), ``length``
@@ -157,18 +156,9 @@ class EvaluatorModule(L.LightningModule):
         for name, value in result.items():
             self.log(f"val/{name}", value, prog_bar=name == "top3")
 
-    def configure_optimizers(self) -> dict[str, Any]:
-        def trainable_only(params: Iterable[torch.nn.Parameter]) -> Optimizer:
-            # the frozen CLIP embeddings never reach the optimizer (nor its weight decay)
-            return self.optimizer_factory(params=[p for p in params if p.requires_grad])
-
-        return warmup_multistep_optimizers(
-            self,
-            trainable_only,
-            warmup_fraction=self.hparams.warmup_fraction,
-            milestones=self.hparams.lr_milestones,
-            gamma=self.hparams.lr_gamma,
-        )
+    def optimized_parameters(self) -> list[torch.nn.Parameter]:
+        # the frozen CLIP embeddings never reach the optimizer (nor its weight decay)
+        return [p for p in self.parameters() if p.requires_grad]
 
     # ------------------------------------------------------------------ checkpoints
 

@@ -17,13 +17,15 @@ import math
 from typing import NamedTuple
 
 import torch
-import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 
+from intermask.utils.layers import Attention
 
-class MultiHeadAttention(nn.Module):
-    """Scaled dot-product attention over (G, S, D) groups with an optional (G, S_k) key padding.
+
+class MultiHeadAttention(Attention):
+    """:class:`~intermask.utils.layers.Attention` over (G, S, D) groups with an optional
+    (G, S_k) key padding, initialised like ``nn.MultiheadAttention`` (the reference's layer).
 
     Groups whose keys are all padded (a padded time step in spatial attention, an empty clip)
     would give NaN from a softmax over nothing; they attend to every key instead and their
@@ -31,18 +33,12 @@ class MultiHeadAttention(nn.Module):
     """
 
     def __init__(self, *, width: int, heads: int, dropout: float) -> None:
-        super().__init__()
-        if width % heads:
-            raise ValueError(f"width {width} is not divisible by {heads} heads")
-        self.heads, self.dropout = heads, dropout
-        self.query = nn.Linear(width, width)
-        self.key_value = nn.Linear(width, 2 * width)
-        self.out = nn.Linear(width, width)
+        super().__init__(width=width, heads=heads, dropout=dropout)
         self.reset_parameters()
 
     def reset_parameters(self) -> None:
         # Xavier-uniform over the packed (3D, D) projection and zero biases, as
-        # nn.MultiheadAttention (the reference's layer) initialises its in-projection.
+        # nn.MultiheadAttention initialises its in-projection.
         width = self.out.in_features
         bound = math.sqrt(6.0 / (width + 3 * width))
         for linear in (self.query, self.key_value):
@@ -57,22 +53,12 @@ class MultiHeadAttention(nn.Module):
         key_padding_mask: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """(G, S_q, D) queries, (G, S_k, D) keys/values (default ``x``) -> (G, S_q, D)."""
-        context = x if context is None else context
-        q = rearrange(self.query(x), "g s (h d) -> g h s d", h=self.heads)
-        k, v = rearrange(
-            self.key_value(context), "g s (two h d) -> two g h s d", two=2, h=self.heads
-        )
-        attn_mask, empty = None, None
-        if key_padding_mask is not None:
-            keep = ~key_padding_mask  # (G, S_k), True = attend (SDPA convention)
-            empty = ~keep.any(dim=-1)  # (G,)
-            attn_mask = (keep | empty[:, None])[:, None, None, :]
-        out = F.scaled_dot_product_attention(
-            q, k, v, attn_mask=attn_mask, dropout_p=self.dropout if self.training else 0.0
-        )
-        if empty is not None:
-            out = out.masked_fill(empty[:, None, None, None], 0.0)
-        return self.out(rearrange(out, "g h s d -> g s (h d)"))
+        if key_padding_mask is None:
+            return super().forward(x, context)
+        keep = ~key_padding_mask  # (G, S_k), True = attend (SDPA convention)
+        empty = ~keep.any(dim=-1)  # (G,)
+        out = super().forward(x, context, (keep | empty[:, None])[:, None, None, :])
+        return out.masked_fill(empty[:, None, None], 0.0)
 
 
 class SpatioTemporalOutput(NamedTuple):

@@ -13,7 +13,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-import lightning as L
 import torch
 import torch.nn.functional as F
 from torch.optim import Optimizer
@@ -34,7 +33,7 @@ from intermask.interm.sampler import (
 )
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
-from intermask.utils.schedules import warmup_multistep_optimizers
+from intermask.utils.lightning import LossStepsModule
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.views import TwoPersonView
 
@@ -74,7 +73,7 @@ def masked_accuracy(
     return (logits[mask].argmax(dim=-1) == targets[mask]).float().mean()
 
 
-class InterMModule(L.LightningModule):
+class InterMModule(LossStepsModule):
     """Trains :class:`InterMTransformer` on interaction batches of the DataModule.
 
     Batch: ``motion`` (B, 2, T, *F) normalized features, ``length`` (B,) frames, ``caption``
@@ -238,31 +237,13 @@ class InterMModule(L.LightningModule):
             stage2 = masked_cross_entropy(logits2, targets, unroll.mask)
         return InterMLosses(stage1 + stage2, stage1, stage2, accuracy)
 
-    def _log_losses(self, prefix: str, losses: InterMLosses, batch_size: int) -> None:
-        sync = prefix == "val"
-        self.log(
-            f"{prefix}/loss", losses.total, batch_size=batch_size, prog_bar=True, sync_dist=sync
-        )
-        self.log(f"{prefix}/loss_stage1", losses.stage1, batch_size=batch_size, sync_dist=sync)
-        self.log(f"{prefix}/loss_stage2", losses.stage2, batch_size=batch_size, sync_dist=sync)
-        self.log(
-            f"{prefix}/masked_accuracy",
-            losses.masked_accuracy,
-            batch_size=batch_size,
-            sync_dist=sync,
-        )
-
-    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
-        losses = self.compute_losses(batch, condition_drop=self.hparams.condition_drop)
-        self._log_losses("train", losses, batch["motion"].shape[0])
-        return losses.total
-
-    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
-        with torch.no_grad():
-            losses = self.compute_losses(batch, condition_drop=0.0)
-        self._log_losses("val", losses, batch["motion"].shape[0])
-        if batch_idx == 0 and self.hparams.validation_samples > 0:
-            self._log_validation_samples(batch)
+    def loss_values(self, losses: InterMLosses) -> dict[str, torch.Tensor]:
+        return {
+            "loss": losses.total,
+            "loss_stage1": losses.stage1,
+            "loss_stage2": losses.stage2,
+            "masked_accuracy": losses.masked_accuracy,
+        }
 
     def _log_validation_samples(self, batch: dict[str, Any]) -> None:
         """Generate from the first captions of the batch and log decoded joint statistics of
@@ -284,12 +265,3 @@ class InterMModule(L.LightningModule):
         for source, joints in (("generated", generated.joints), ("real", real)):
             for name, value in interaction_statistics(joints, lengths, fps=fps).items():
                 self.log(f"val_samples/{source}_{name}", value, batch_size=count)
-
-    def configure_optimizers(self) -> dict[str, Any]:
-        return warmup_multistep_optimizers(
-            self,
-            self.optimizer_factory,
-            warmup_fraction=self.hparams.warmup_fraction,
-            milestones=self.hparams.lr_milestones,
-            gamma=self.hparams.lr_gamma,
-        )

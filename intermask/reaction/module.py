@@ -12,7 +12,6 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-import lightning as L
 import torch
 from torch.optim import Optimizer
 
@@ -30,7 +29,7 @@ from intermask.reaction.sampler import (
     pooled_text,
 )
 from intermask.text.cache import TextFeatureCache
-from intermask.utils.schedules import warmup_multistep_optimizers
+from intermask.utils.lightning import LossStepsModule
 
 
 class ARFlowLosses(NamedTuple):
@@ -46,7 +45,7 @@ class _Frozen:
     text: TextFeatureCache | None
 
 
-class ARFlowModule(L.LightningModule):
+class ARFlowModule(LossStepsModule):
     """Flow matching from the actor's motion x0 to the reactor's motion x1 (ARFlow).
 
     Batch: "motion" (B, 2, T, *F) normalized, "length" (B,), "caption" (B texts), optional
@@ -182,9 +181,8 @@ class ARFlowModule(L.LightningModule):
         total = reconstruction + self.hparams.lambda_inter * inter.total
         return ARFlowLosses(total, reconstruction, inter)
 
-    def _log_losses(self, prefix: str, losses: ARFlowLosses, batch_size: int) -> None:
-        sync = prefix == "val"
-        values = {
+    def loss_values(self, losses: ARFlowLosses) -> dict[str, torch.Tensor]:
+        return {
             "loss": losses.total,
             "reconstruction": losses.reconstruction,
             "interaction": losses.interaction.total,
@@ -192,26 +190,6 @@ class ARFlowModule(L.LightningModule):
             "interaction_orientation": losses.interaction.orientation,
             "interaction_translation": losses.interaction.translation,
         }
-        for name, value in values.items():
-            self.log(
-                f"{prefix}/{name}",
-                value,
-                batch_size=batch_size,
-                prog_bar=name == "loss",
-                sync_dist=sync,
-            )
-
-    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
-        losses = self.compute_losses(batch, condition_drop=self.hparams.condition_drop)
-        self._log_losses("train", losses, batch["motion"].shape[0])
-        return losses.total
-
-    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
-        with torch.no_grad():
-            losses = self.compute_losses(batch, condition_drop=0.0)
-        self._log_losses("val", losses, batch["motion"].shape[0])
-        if batch_idx == 0 and self.hparams.validation_samples > 0:
-            self._log_validation_samples(batch)
 
     def _log_validation_samples(self, batch: dict[str, Any]) -> None:
         """Reactions for the first items (fixed seeds), plain and guided: reactor MPJPE (mm)
@@ -249,12 +227,3 @@ class ARFlowModule(L.LightningModule):
             )
         for name, value in values.items():
             self.log(f"val_samples/{name}", value, batch_size=count)
-
-    def configure_optimizers(self) -> dict[str, Any]:
-        return warmup_multistep_optimizers(
-            self,
-            self.optimizer_factory,
-            warmup_fraction=self.hparams.warmup_fraction,
-            milestones=self.hparams.lr_milestones,
-            gamma=self.hparams.lr_gamma,
-        )

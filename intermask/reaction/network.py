@@ -19,8 +19,9 @@ import math
 
 import torch
 import torch.nn.functional as F
-from einops import rearrange
 from torch import nn
+
+from intermask.utils.layers import Attention
 
 
 def sinusoidal_embedding(positions: torch.Tensor, dim: int) -> torch.Tensor:
@@ -34,30 +35,6 @@ def sinusoidal_embedding(positions: torch.Tensor, dim: int) -> torch.Tensor:
     if dim % 2:
         embedding = F.pad(embedding, (0, 1))
     return embedding
-
-
-class Attention(nn.Module):
-    """Multi-head SDPA attention with a boolean (B, 1, S_q, S_k) mask, True = may attend."""
-
-    def __init__(self, *, width: int, heads: int, dropout: float) -> None:
-        super().__init__()
-        if width % heads:
-            raise ValueError(f"width {width} is not divisible by {heads} heads")
-        self.heads, self.dropout = heads, dropout
-        self.query = nn.Linear(width, width)
-        self.key_value = nn.Linear(width, 2 * width)
-        self.out = nn.Linear(width, width)
-
-    def forward(self, x: torch.Tensor, context: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        """(B, S_q, D) queries, (B, S_k, D) context, (B, 1, S_q, S_k) mask -> (B, S_q, D)."""
-        q = rearrange(self.query(x), "b s (h d) -> b h s d", h=self.heads)
-        k, v = rearrange(
-            self.key_value(context), "b s (two h d) -> two b h s d", two=2, h=self.heads
-        )
-        out = F.scaled_dot_product_attention(
-            q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0
-        )
-        return self.out(rearrange(out, "b h s d -> b s (h d)"))
 
 
 class DecoderBlock(nn.Module):

@@ -2,7 +2,47 @@
 
 from __future__ import annotations
 
+import torch
+import torch.nn.functional as F
+from einops import rearrange
 from torch import nn
+
+
+class Attention(nn.Module):
+    """Multi-head scaled dot-product attention (SDPA) with a packed key/value projection.
+
+    The core of Inter-M's attentions (which add key padding) and of ARFlow's decoder (which
+    passes causal and padding masks).
+    """
+
+    def __init__(self, *, width: int, heads: int, dropout: float) -> None:
+        super().__init__()
+        if width % heads:
+            raise ValueError(f"width {width} is not divisible by {heads} heads")
+        self.heads, self.dropout = heads, dropout
+        self.query = nn.Linear(width, width)
+        self.key_value = nn.Linear(width, 2 * width)
+        self.out = nn.Linear(width, width)
+
+    def forward(
+        self,
+        x: torch.Tensor,
+        context: torch.Tensor | None = None,
+        mask: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """(B, S_q, D) queries, (B, S_k, D) keys/values (default ``x``) -> (B, S_q, D).
+
+        ``mask``: bool, broadcastable to (B, heads, S_q, S_k), True = may attend.
+        """
+        context = x if context is None else context
+        q = rearrange(self.query(x), "b s (h d) -> b h s d", h=self.heads)
+        k, v = rearrange(
+            self.key_value(context), "b s (two h d) -> two b h s d", two=2, h=self.heads
+        )
+        out = F.scaled_dot_product_attention(
+            q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0
+        )
+        return self.out(rearrange(out, "b h s d -> b s (h d)"))
 
 
 def post_norm_gelu_encoder(

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from typing import Any
 
 import lightning as L
+from torch import nn
 from torch.optim import Optimizer
 from torch.optim.lr_scheduler import LambdaLR
 
@@ -39,13 +40,17 @@ def warmup_multistep_optimizers(
     module: L.LightningModule,
     optimizer_factory: Callable[..., Optimizer],
     *,
+    parameters: Iterable[nn.Parameter] | None = None,
     warmup_fraction: float,
     milestones: Sequence[float],
     gamma: float,
 ) -> dict[str, Any]:
     """``configure_optimizers`` result: the module's optimizer with the warm-up multistep schedule
-    over the trainer's total optimizer steps, stepped every step."""
-    optimizer = optimizer_factory(params=module.parameters())
+    over the trainer's total optimizer steps, stepped every step. ``parameters``: what the
+    optimizer updates (default: all of the module's)."""
+    optimizer = optimizer_factory(
+        params=module.parameters() if parameters is None else list(parameters)
+    )
     schedule = partial(
         warmup_multistep_factor,
         total_steps=max(int(module.trainer.estimated_stepping_batches), 1),

@@ -7,12 +7,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict
 from typing import Any
 
-import lightning as L
 import torch
 from torch.optim import Optimizer
 
 from intermask.metrics.mpjpe import MPJPE
-from intermask.utils.schedules import warmup_multistep_optimizers
+from intermask.utils.lightning import ScheduledModule
 from intermask.vq.losses import LossKind, LossTerms, LossWeights, vq_losses
 from intermask.vq.model import MotionVQVAE, VQVAEOutput
 from intermask.vq.views import InterHumanView, TwoPersonView, person_view
@@ -20,7 +19,7 @@ from intermask.vq.views import InterHumanView, TwoPersonView, person_view
 log = logging.getLogger(__name__)
 
 
-class VQVAEModule(L.LightningModule):
+class VQVAEModule(ScheduledModule):
     """Trains :class:`MotionVQVAE` on single-person windows ``batch["motion"]: (B, T, *F)``.
 
     Args:
@@ -150,12 +149,3 @@ class VQVAEModule(L.LightningModule):
         if real.positions is not None:
             self.val_mpjpe.update(predicted.positions, real.positions, frame_mask)
             self.log("val/mpjpe_mm", self.val_mpjpe, batch_size=batch_size, prog_bar=True)
-
-    def configure_optimizers(self) -> dict[str, Any]:
-        return warmup_multistep_optimizers(
-            self,
-            self.optimizer_factory,
-            warmup_fraction=self.hparams.warmup_fraction,
-            milestones=self.hparams.lr_milestones,
-            gamma=self.hparams.lr_gamma,
-        )

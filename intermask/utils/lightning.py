@@ -1,0 +1,68 @@
+"""LightningModule bases shared by the VQ-VAE, Inter-M, ARFlow and the evaluator."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any, NamedTuple
+
+import lightning as L
+import torch
+from torch import nn
+
+from intermask.utils.schedules import warmup_multistep_optimizers
+
+
+class ScheduledModule(L.LightningModule):
+    """Optimizer ``self.optimizer_factory`` over :meth:`optimized_parameters`, with the warm-up
+    multistep schedule of the hyper-parameters ``warmup_fraction``, ``lr_milestones`` and
+    ``lr_gamma`` (fractions of the run's optimizer steps), stepped every step."""
+
+    def optimized_parameters(self) -> Iterable[nn.Parameter]:
+        """What the optimizer updates (default: every parameter)."""
+        return self.parameters()
+
+    def configure_optimizers(self) -> dict[str, Any]:
+        return warmup_multistep_optimizers(
+            self,
+            self.optimizer_factory,
+            parameters=self.optimized_parameters(),
+            warmup_fraction=self.hparams.warmup_fraction,
+            milestones=self.hparams.lr_milestones,
+            gamma=self.hparams.lr_gamma,
+        )
+
+
+class LossStepsModule(ScheduledModule):
+    """Training and validation steps of a module trained on one tuple of losses per batch.
+
+    Subclasses provide ``compute_losses(batch, condition_drop=p)`` returning a NamedTuple with a
+    ``total``, :meth:`loss_values` naming what to log, ``_log_validation_samples(batch)``, and the
+    hyper-parameters ``condition_drop`` (training only; validation drops nothing) and
+    ``validation_samples`` (generate from the first validation batch when positive).
+    """
+
+    def loss_values(self, losses: NamedTuple) -> Mapping[str, torch.Tensor]:
+        """Logged as ``train/<name>`` and ``val/<name>``; "loss" also goes to the progress bar."""
+        raise NotImplementedError
+
+    def _log_losses(self, prefix: str, losses: NamedTuple, batch_size: int) -> None:
+        for name, value in self.loss_values(losses).items():
+            self.log(
+                f"{prefix}/{name}",
+                value,
+                batch_size=batch_size,
+                prog_bar=name == "loss",
+                sync_dist=prefix == "val",
+            )
+
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        losses = self.compute_losses(batch, condition_drop=self.hparams.condition_drop)
+        self._log_losses("train", losses, batch["motion"].shape[0])
+        return losses.total
+
+    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
+        with torch.no_grad():
+            losses = self.compute_losses(batch, condition_drop=0.0)
+        self._log_losses("val", losses, batch["motion"].shape[0])
+        if batch_idx == 0 and self.hparams.validation_samples > 0:
+            self._log_validation_samples(batch)
