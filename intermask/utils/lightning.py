@@ -12,6 +12,17 @@ from torch import nn
 from intermask.utils.schedules import warmup_multistep_optimizers
 
 
+def writes_step_logs(module: L.LightningModule) -> bool:
+    """Whether the logger writes the values a ``training_step`` logs now (every
+    ``log_every_n_steps`` optimizer steps, Lightning's rule); values logged on other steps are
+    dropped, so costly ones can be skipped there. True outside a trainer."""
+    trainer = module._trainer
+    if trainer is None:
+        return True
+    every = trainer.log_every_n_steps
+    return every > 0 and ((module.global_step + 1) % every == 0 or trainer.should_stop)
+
+
 class ScheduledModule(L.LightningModule):
     """Optimizer ``self.optimizer_factory`` over :meth:`optimized_parameters`, with the warm-up
     multistep schedule of the hyper-parameters ``warmup_fraction``, ``lr_milestones`` and

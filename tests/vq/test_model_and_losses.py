@@ -68,7 +68,17 @@ def _geometry_pair():
     return view, target
 
 
-def _losses(view, prediction, target, *, frame_mask=None, commit=0.0, kind="smooth_l1"):
+def _losses(
+    view,
+    prediction,
+    target,
+    *,
+    frame_mask=None,
+    commit=0.0,
+    kind="smooth_l1",
+    weights=None,
+    measure_unweighted=True,
+):
     if frame_mask is None:
         frame_mask = torch.ones(target.shape[:2], dtype=torch.bool)
     return vq_losses(
@@ -79,8 +89,9 @@ def _losses(view, prediction, target, *, frame_mask=None, commit=0.0, kind="smoo
         reconstruction_mask=view.reconstruction_mask(target.device),
         frame_mask=frame_mask,
         commit_loss=torch.tensor(commit),
-        weights=LossWeights(),
+        weights=weights or LossWeights(),
         kind=kind,
+        measure_unweighted=measure_unweighted,
     )
 
 
@@ -113,6 +124,27 @@ def test_geometric_terms_measure_what_they_claim():
     assert terms.velocity.item() == pytest.approx(0.0, abs=1e-6)
     assert terms.bone_length.item() == pytest.approx(0.0, abs=1e-6)
     assert terms.geodesic.item() == pytest.approx(0.1, abs=1e-4)
+
+
+def test_a_geodesic_term_of_weight_zero_is_measured_without_a_graph_or_skipped():
+    view, target = _geometry_pair()
+    turn = rotation_about_axis(torch.tensor(0.1), "y")
+    turned = target.clone()
+    turned[..., ih.ROTATIONS] = matrix_to_rot6d(
+        turn @ rot6d_to_matrix(ih.split_features(target).rot6d)
+    ).flatten(-2)
+    prediction = turned.clone().requires_grad_(True)
+    no_geodesic = LossWeights(geodesic=0.0)
+    measured = _losses(view, prediction, target, weights=no_geodesic)
+    assert measured.geodesic.item() == pytest.approx(0.1, abs=1e-4)
+    assert not measured.geodesic.requires_grad  # only the weighted terms build a graph
+    assert measured.total.requires_grad
+    weighted = _losses(view, prediction, target)
+    assert weighted.geodesic.requires_grad
+    assert weighted.total.item() == pytest.approx(measured.total.item() + 0.01 * 0.1, abs=1e-5)
+    skipped = _losses(view, prediction, target, weights=no_geodesic, measure_unweighted=False)
+    assert skipped.geodesic.item() == 0.0
+    assert skipped.total.item() == pytest.approx(measured.total.item())
 
 
 def test_foot_contact_penalises_sliding_planted_feet_only():
