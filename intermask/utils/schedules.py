@@ -40,17 +40,14 @@ def warmup_multistep_optimizers(
     module: L.LightningModule,
     optimizer_factory: Callable[..., Optimizer],
     *,
-    parameters: Iterable[nn.Parameter] | None = None,
+    parameters: Iterable[nn.Parameter],
     warmup_fraction: float,
     milestones: Sequence[float],
     gamma: float,
 ) -> dict[str, Any]:
-    """``configure_optimizers`` result: the module's optimizer with the warm-up multistep schedule
-    over the trainer's total optimizer steps, stepped every step. ``parameters``: what the
-    optimizer updates (default: all of the module's)."""
-    optimizer = optimizer_factory(
-        params=module.parameters() if parameters is None else list(parameters)
-    )
+    """``configure_optimizers`` result: an optimizer over ``parameters`` with the warm-up
+    multistep schedule over the trainer's total optimizer steps, stepped every step."""
+    optimizer = optimizer_factory(params=list(parameters))
     schedule = partial(
         warmup_multistep_factor,
         total_steps=max(int(module.trainer.estimated_stepping_batches), 1),

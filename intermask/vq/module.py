@@ -80,7 +80,9 @@ class VQVAEModule(ScheduledModule):
     def forward(self, features: torch.Tensor) -> torch.Tensor:
         return self.net(features).reconstruction
 
-    def _step(self, batch: dict[str, Any]) -> tuple[LossTerms, torch.Tensor, Any, Any]:
+    def _step(
+        self, batch: dict[str, Any], *, measure_unweighted: bool = True
+    ) -> tuple[LossTerms, torch.Tensor, Any, Any]:
         motion = batch["motion"]
         frame_mask = batch.get("frame_mask")
         if frame_mask is None:
@@ -88,10 +90,14 @@ class VQVAEModule(ScheduledModule):
         out = self.net(motion)
         with torch.autocast(device_type=motion.device.type, enabled=False):
             # geometry (Gram-Schmidt, bone lengths, metres) and losses in float32 under bf16
-            return self._losses(out, motion.float(), frame_mask)
+            return self._losses(out, motion.float(), frame_mask, measure_unweighted)
 
     def _losses(
-        self, out: VQVAEOutput, motion: torch.Tensor, frame_mask: torch.Tensor
+        self,
+        out: VQVAEOutput,
+        motion: torch.Tensor,
+        frame_mask: torch.Tensor,
+        measure_unweighted: bool,
     ) -> tuple[LossTerms, torch.Tensor, VQVAEOutput, Any]:
         prediction, target, view = out.reconstruction.float(), motion, self.net.view
         if isinstance(view, TwoPersonView):  # losses and metrics per person
@@ -113,16 +119,17 @@ class VQVAEModule(ScheduledModule):
             commit_loss=out.commit_loss,
             weights=self.loss_weights,
             kind=self.loss_kind,
-            # unweighted terms only matter where they are logged
-            measure_unweighted=not self.training or writes_step_logs(self),
+            measure_unweighted=measure_unweighted,
         )
         return terms, frame_mask, out, (predicted, real)
 
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
-        terms, _, out, _ = self._step(batch)
+        logged = writes_step_logs(self)
+        # unweighted loss terms only matter on steps whose logs are written
+        terms, _, out, _ = self._step(batch, measure_unweighted=logged)
         batch_size = batch["motion"].shape[0]
         self.log("train/loss", terms.total, batch_size=batch_size, prog_bar=True)
-        if not writes_step_logs(self):
+        if not logged:
             # the rest would be dropped; a dozen self.log calls are ~5% of a CPU demo step
             return terms.total
         self.log_dict(
