@@ -12,8 +12,9 @@ from typing import Any
 import hydra
 import lightning as L
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
+from intermask.utils.precision import PrecisionChoice, resolve_precision
 from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
@@ -40,11 +41,25 @@ def count_parameters(module: L.LightningModule) -> tuple[int, int]:
     return total, sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
+def decide_precision(cfg: DictConfig) -> PrecisionChoice:
+    """Resolve ``trainer.precision: auto`` in ``cfg`` (in place, once) and log the choice."""
+    choice = resolve_precision(cfg.trainer.precision, str(cfg.trainer.get("accelerator", "auto")))
+    if choice.requested != choice.precision:
+        with open_dict(cfg):
+            cfg.trainer.precision = choice.precision
+    # e.g. "precision: 32-true (CPU capability AVX2, no native bf16)"
+    log.info("precision: %s (%s)", choice.precision, choice.reason)
+    return choice
+
+
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit the configured model on the configured data; returns the final callback metrics."""
     L.seed_everything(cfg.seed, workers=True)
     output_dir = Path(cfg.paths.output_dir)
-    write_run_record(output_dir, cfg, extra={"job": cfg.task_name})
+    precision = decide_precision(cfg)
+    write_run_record(
+        output_dir, cfg, extra={"job": cfg.task_name, "precision": precision.as_record()}
+    )
     datamodule = instantiate(cfg.data)
     model = instantiate(cfg.model)
     total, trainable = count_parameters(model)

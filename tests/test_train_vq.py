@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -47,6 +48,9 @@ def test_train_vq_writes_record_checkpoints_and_tensorboard(
     assert re.search(r"VQVAEModule: \d+\.\d\dM parameters", caplog.text)
     assert metrics["val/mpjpe_mm"] > 0 and torch.isfinite(torch.tensor(metrics["train/loss"]))
     assert (tmp_path / "config.yaml").is_file() and (tmp_path / "run_record.json").is_file()
+    precision = json.loads((tmp_path / "run_record.json").read_text())["precision"]
+    assert precision["requested"] == "auto" and precision["precision"] in ("32-true", "bf16-mixed")
+    assert f"precision: {precision['precision']} ({precision['reason']})" in caplog.text
     assert (tmp_path / "checkpoints" / "last.ckpt").is_file()
     events = list((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
     assert events, "no TensorBoard event file"
