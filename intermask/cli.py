@@ -1,7 +1,7 @@
 """The ``intermask`` console script.
 
-``intermask data synth|check|stats|item`` work on dataset folders; ``intermask generate`` turns
-captions (and optionally a reference or an edited motion) into interactions. Heavy imports happen
+``intermask data synth|check|stats|item|success-stats`` work on dataset folders; ``intermask
+generate`` turns captions (and optionally a reference or an edited motion) into interactions. Heavy imports happen
 inside the sub-commands so that ``intermask --help`` answers at once.
 """
 
@@ -90,6 +90,21 @@ def _data_item(args: argparse.Namespace) -> int:
         root, dataset_format, split=args.split, clip_id=args.id, out_path=Path(args.out)
     )
     print(f"clip {args.id} ({dataset_format}, {args.split}) written to {path}")
+    return 0
+
+
+def _data_success_stats(args: argparse.Namespace) -> int:
+    from intermask.metrics.success_stats import success_statistics
+
+    root = Path(args.root)
+    statistics = success_statistics(
+        root,
+        dataset=_resolve_format(root, args.format),
+        splits=args.split or ("train", "val", "test"),
+        max_length=args.max_length,
+        epoch=args.epoch,
+    )
+    print(statistics.report())
     return 0
 
 
@@ -258,6 +273,28 @@ def build_parser() -> argparse.ArgumentParser:
     item.add_argument("--id", required=True, help="clip id (file stem / sample name)")
     item.add_argument("--out", required=True, help="output .npz path")
     item.set_defaults(run=_data_item)
+
+    success = data.add_parser(
+        "success-stats",
+        help="interaction-success signals of a labelled dataset's GT, with the GT pass rates",
+        description="Items are read as the evaluation protocol reads them (random crop of "
+        "--max-length frames, person order drawn per item, pass --epoch); the thresholds in "
+        "use and the suggested ones (intermask.metrics.success_stats) are printed.",
+    )
+    success.add_argument("root", type=Path)
+    _add_format_option(success)
+    success.add_argument(
+        "--split", action="append", help="split to read (repeat; default train, val and test)"
+    )
+    success.add_argument(
+        "--max-length",
+        type=int,
+        default=None,
+        help="crop length in frames (default: the full"
+        " clip up to the DataModule's maximum, 300 InterHuman / 150 Inter-X)",
+    )
+    success.add_argument("--epoch", type=int, default=0, help="evaluation pass (crop draws)")
+    success.set_defaults(run=_data_success_stats)
 
     _add_generate_parser(commands)
     return parser

@@ -1,0 +1,81 @@
+"""Interaction success: the share of motions that show their action, overall and per action.
+
+The predicates and their thresholds are in :mod:`intermask.metrics.interaction`; this class only
+accumulates their outcomes. Like FID and Diversity it keeps one row per sample (outcome, action,
+sample id) rather than running sums, so the padded duplicates a ``DistributedSampler`` adds can
+be dropped by id at ``compute`` (:mod:`intermask.metrics.dedup`); a row is three integers.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torchmetrics import Metric
+
+from intermask.metrics.dedup import gather_samples, sample_id_column
+from intermask.metrics.interaction import ACTIONS, SuccessThresholds, interaction_success
+
+
+class SuccessRates(NamedTuple):
+    """overall: () success rate; per_action: (A,) rates in ``ACTIONS`` order, NaN for an action
+    without samples; counts: (A,) samples per action."""
+
+    overall: torch.Tensor
+    per_action: torch.Tensor
+    counts: torch.Tensor
+
+    def as_dict(self) -> dict[str, float]:
+        """``{"success": rate, "success/<action>": rate, ...}`` for the actions with samples."""
+        values = {"success": float(self.overall)}
+        for action, rate, count in zip(ACTIONS, self.per_action, self.counts, strict=True):
+            if int(count):
+                values[f"success/{action}"] = float(rate)
+        return values
+
+
+class InteractionSuccess(Metric):
+    """Success rate of :func:`~intermask.metrics.interaction.interaction_success`.
+
+    ``update(joints (B, T, 2, 22, 3), lengths (B,), action_ids (B,), actors (B,) | None = None,
+    *, sample_ids (B,) int64 | None = None)``: joints in metres, Y up; actors 1 or 2 in the joints'
+    person order, 0 or None when unknown (generated motion: either person may act).
+    ``compute() -> SuccessRates``.
+    """
+
+    full_state_update = False
+    higher_is_better = True
+    is_differentiable = False
+
+    def __init__(self, *, thresholds: SuccessThresholds | None = None) -> None:
+        super().__init__()
+        self.thresholds = thresholds or SuccessThresholds()
+        for name in ("outcomes", "sample_ids"):
+            self.add_state(name, default=[], dist_reduce_fx="cat")
+
+    def update(
+        self,
+        joints: torch.Tensor,
+        lengths: torch.Tensor,
+        action_ids: torch.Tensor,
+        actors: torch.Tensor | None = None,
+        *,
+        sample_ids: torch.Tensor | None = None,
+    ) -> None:
+        passed = interaction_success(
+            joints, lengths, action_ids, actors, thresholds=self.thresholds
+        )
+        ids = sample_id_column(
+            sample_ids, joints.shape[0], metric="InteractionSuccess", device=self.device
+        )
+        rows = torch.stack((passed.long().to(self.device), action_ids.long().to(self.device)), -1)
+        self.outcomes.append(rows)  # (B, 2): passed, action id
+        self.sample_ids.append(ids)
+
+    def compute(self) -> SuccessRates:
+        rows = gather_samples(self.outcomes, self.sample_ids, metric="InteractionSuccess")
+        passed, actions = rows[:, 0].double(), rows[:, 1]
+        counts = torch.bincount(actions, minlength=len(ACTIONS)).double()
+        hits = torch.bincount(actions, weights=passed, minlength=len(ACTIONS))
+        per_action = torch.where(counts > 0, hits / counts.clamp_min(1), torch.nan)
+        return SuccessRates(passed.mean(), per_action, counts.long())
