@@ -12,7 +12,10 @@ random, and canonicalization depends on both) by ``intermask.motion.interhuman``
 
 Item modes:
     "interaction": {"motion": (2, max_length, 262), "length", "caption", "id", "mirrored",
-                    "persons", and "action", "action_id", "actor" when interaction_meta.json exists}
+                    "persons", "start" (crop start frame), "reference" (the file person, 1 or 2,
+                    the pair is canonicalized on), and "action", "action_id", "actor" when
+                    interaction_meta.json exists}. id, mirrored, start, reference and persons
+                    fix the features of each person (what Inter-M's token cache keys on).
     "window":      {"motion": (window, 262), "id", "person", "mirrored", "start"}: single-person
                    windows over whole canonical sequences (person 2 in person 1's frame); with
                    ``window_persons=2`` two-person windows (window, 2, 262) and "person" 0
@@ -32,9 +35,9 @@ from torch.utils.data import Dataset
 
 from intermask.data.captions import swap_left_right
 from intermask.data.common import (
-    check_item_options,
     ClipMeta,
     ItemKey,
+    check_item_options,
     item_rng,
     log_skipped,
     read_caption_lines,
@@ -355,6 +358,8 @@ class InterHumanDataset(Dataset):
             "id": self.clip_ids[clip],
             "mirrored": mirrored,
             "persons": torch.tensor(persons),
+            "start": start,
+            "reference": 2 if swap_reference else 1,
         }
         if self.meta is not None:
             meta = self.meta[clip]

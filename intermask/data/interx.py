@@ -34,8 +34,8 @@ from einops import rearrange
 from torch.utils.data import Dataset
 
 from intermask.data.common import (
-    check_item_options,
     ItemKey,
+    check_item_options,
     check_motion_array,
     item_rng,
     log_skipped,
@@ -149,7 +149,8 @@ def person_features(raw: torch.Tensor) -> torch.Tensor:
 class InterXDataset(Dataset):
     """Inter-X clips of one split; items mirror ``InterHumanDataset`` with motion (2, max_length, 56, 6).
 
-    Interaction items: {"motion", "length", "caption", "tokens", "id", "persons"} plus "action",
+    Interaction items: {"motion", "length", "caption", "tokens", "id", "persons", "start" (crop
+    start frame; with id, length and persons it fixes each person's features)} plus "action",
     "action_id" (from the name or interaction_meta.json) and "actor" (interaction_order.pkl or the
     meta file) when available. Window items: {"motion": (window, 56, 6), "id", "person", "start"}; with
     ``window_persons=2`` the motion is (window, 2, 56, 6) and "person" is 0.
@@ -350,6 +351,7 @@ class InterXDataset(Dataset):
             "tokens": caption.tokens,
             "id": self.clip_ids[index],
             "persons": torch.tensor(persons),
+            "start": start,
         }
         if self.actions is not None:
             item.update(action=self.actions[index][0], action_id=self.actions[index][1])
