@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 
 import torch
 import torch.nn.functional as F
+from einops import rearrange
 from torch.optim import Optimizer
 
 from intermask.interm.masking import (
@@ -31,6 +32,7 @@ from intermask.interm.sampler import (
     InteractionSampler,
     joints_from_features,
 )
+from intermask.interm.token_cache import TokenCache, crop_keys
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
 from intermask.utils.lightning import LossStepsModule
@@ -99,6 +101,9 @@ class InterMModule(LossStepsModule):
         sample_iterations: decoding iterations for those samples (fewer than the paper's 20
             keeps validation cheap).
         fps: frame rate of the dataset, for speeds in m/s.
+        token_cache: keep the VQ codes of every crop the batches identify (``id``, ``start``,
+            ``persons``, ``mirrored``, ``reference``) and reuse them instead of re-encoding; exact
+            (:mod:`intermask.interm.token_cache`), emptied when the VQ changes.
     """
 
     def __init__(
@@ -117,6 +122,7 @@ class InterMModule(LossStepsModule):
         validation_samples: int = 4,
         sample_iterations: int = 10,
         fps: float = 30.0,
+        token_cache: bool = True,
     ) -> None:
         super().__init__()
         if isinstance(vq.view, TwoPersonView):
@@ -144,6 +150,7 @@ class InterMModule(LossStepsModule):
         self.last_samples: tuple[list[str], GeneratedMotion] | None = None
         vq.eval().requires_grad_(False)
         self._frozen = _Frozen(vq=vq, text=text)
+        self.token_cache = TokenCache(codebook_size=vq_codes) if token_cache else None
         self.optimizer_factory = optimizer
         # plain Python values only, so checkpoints load with torch.load(weights_only=True)
         self.save_hyperparameters(
@@ -157,6 +164,7 @@ class InterMModule(LossStepsModule):
                 "validation_samples": int(validation_samples),
                 "sample_iterations": int(sample_iterations),
                 "fps": float(fps),
+                "token_cache": bool(token_cache),
             },
             logger=False,
         )
@@ -187,13 +195,52 @@ class InterMModule(LossStepsModule):
         lengths = lengths.to(motion.device).long().clamp(max=frames)
         lengths = lengths - lengths % FRAMES_PER_STEP
         self._move_frozen(motion.device)
+        keys = None
+        if self.token_cache is not None:
+            keys = crop_keys(batch, lengths.tolist(), frames)
+        if keys is None:
+            tokens = self._encode(motion[:, :, :frames], lengths)
+        else:
+            tokens = self._cached_tokens(motion[:, :, :frames], lengths, keys)
+        return tokens, lengths // FRAMES_PER_STEP
+
+    def _encode(self, motion: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        """(B, 2, T, *F) and (B,) frames -> (B, 2, rows, T') base-layer codes."""
         # nearest-code search in float32 even under bf16 autocast: rounding could change codes
         with torch.autocast(device_type=motion.device.type, enabled=False):
             tokens = [
-                self.vq.encode(motion[:, person, :frames].float(), lengths)[:, 0]  # (B, rows, T')
+                self.vq.encode(motion[:, person].float(), lengths)[:, 0]  # (B, rows, T')
                 for person in range(2)
             ]
-        return stack_persons(*tokens), lengths // FRAMES_PER_STEP
+        return stack_persons(*tokens)
+
+    def _cached_tokens(self, motion, lengths, keys) -> torch.Tensor:
+        """:meth:`_encode` through the token cache: only samples with a missing person are
+        encoded (both persons, one batch), then stored."""
+        cache = self.token_cache
+        cache.bind(self.vq)
+        codes = [cache.get(key) for key in keys]  # B * 2 entries, (rows, T') or None
+        missing = sorted({i // 2 for i, found in enumerate(codes) if found is None})
+        if missing:
+            index = torch.tensor(missing, device=motion.device)
+            fresh = self._encode(motion[index], lengths[index]).cpu()  # (M, 2, rows, T')
+            for row, sample in enumerate(missing):
+                for person in range(2):
+                    codes[2 * sample + person] = fresh[row, person]
+                    cache.put(keys[2 * sample + person], fresh[row, person])
+        tokens = rearrange(torch.stack(codes), "(b p) r t -> b p r t", p=2)
+        return tokens.to(motion.device)
+
+    def on_train_epoch_start(self) -> None:
+        if self.token_cache is not None:
+            self.token_cache.bind(self.vq, recheck=True)  # weights changed in place: start over
+            self.token_cache.reset_counts()
+
+    def on_train_epoch_end(self) -> None:
+        cache = self.token_cache
+        if cache is not None and cache.lookups:  # this epoch's training and validation crops
+            self.log("token_cache/hit_rate", cache.hit_rate)
+            self.log("token_cache/crops", float(len(cache)))
 
     def sampler(self, **settings: Any) -> InteractionSampler:
         """An :class:`InteractionSampler` over this module's network, VQ-VAE and text cache;
