@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterator
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,7 @@ from intermask.metrics.sources import (
     InterMaskReaction,
     Measured,
     VQReconstruction,
+    motion_joints,
 )
 from intermask.train import CONFIG_DIR
 from intermask.utils.files import file_hash
@@ -50,7 +52,8 @@ def build_sources(
 ) -> tuple[list[MotionSource], dict[str, str]]:
     """The rows after the GT row for ``cfg.mode`` -> (sources, {checkpoint role: 'path (hash)'}).
 
-    interaction: InterMask from ``gen_ckpt``; reaction: InterMask's reaction mode from
+    interaction: InterMask from ``gen_ckpt`` (after its VQ-VAE's reconstruction row when
+    ``reconstruction_row``); reaction: InterMask's reaction mode from
     ``gen_ckpt`` and / or ARFlow from ``arflow_ckpt`` (its steps, guidance and step-ablation
     rows); reconstruction: the VQ-VAE of ``vq_ckpt``.
     """
@@ -92,7 +95,11 @@ def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Mo
     )
     generator.text.encoder.to(device)
     if cfg.mode == "interaction":
-        return [InterMaskGeneration(sampler=sampler)]
+        rows: list[MotionSource] = [InterMaskGeneration(sampler=sampler)]
+        if cfg.reconstruction_row:
+            # the tokenizer's share of the gap: test motion through the generator's own VQ-VAE
+            rows.insert(0, VQReconstruction(vq=generator.vq.to(device)))
+        return rows
     return [
         InterMaskReaction(
             sampler=sampler,
@@ -154,6 +161,7 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     output_dir = Path(cfg.paths.output_dir)
     write_run_record(output_dir, cfg, extra={"job": cfg.task_name})
     constants: ProtocolConstants = instantiate(cfg.protocol)
+    success_thresholds = instantiate(cfg.success)
     replications = cfg.fast_replications if cfg.fast else constants.replications
     constants = ProtocolConstants(**{**vars(constants), "replications": replications})
     device = pick_device(cfg.device)
@@ -184,6 +192,8 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         multimodality=not cfg.fast,
         generation_batch_size=cfg.generation_batch_size,
         progress=lambda message: log.info("%s", message),
+        joints=motion_joints,
+        success_thresholds=success_thresholds,
     )
     header = {
         "mode": cfg.mode,
@@ -200,6 +210,7 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
             else {}
         ),
         "penetration": dict(OmegaConf.to_container(cfg.penetration)),
+        "success_thresholds": asdict(success_thresholds),
         "device": str(device),
     }
     result = runner.run(header)

@@ -212,3 +212,16 @@ def test_demo_protocol_setting():
     assert cfg.protocol.mm_replications == 1 and cfg.data.synthesize_if_missing
     assert cfg.penetration.modes == ["reaction"] and cfg.arflow.steps == 5
     assert list(cfg.arflow.step_ablation) == [2, 10]
+
+
+def test_interaction_table_can_show_the_generators_tokenizer_beside_it(
+    synthetic_interhuman_root, runs, tmp_path
+):
+    cfg = _eval_config(
+        synthetic_interhuman_root, runs, tmp_path, "interaction", ("reconstruction_row=true",)
+    )
+    rows = evaluate(cfg)["rows"]
+    assert list(rows) == ["Ground Truth", "VQ-VAE reconstruction", "InterMask"]
+    reconstruction = rows["VQ-VAE reconstruction"]
+    # the generator's own VQ-VAE: joint error measured, nothing generated so no latency
+    assert reconstruction["mpjpe_mm"]["mean"] > 0 and "latency_ms" not in reconstruction
