@@ -201,8 +201,8 @@ class Pair:
         """First frame at which some joint moves faster than ``moving_speed`` (T if never)."""
         steps = self.joints[1:, person] - self.joints[:-1, person]  # (T-1, 22, 3)
         speed = torch.linalg.vector_norm(steps, dim=-1).amax(-1) * self.fps
-        moving = torch.nonzero(speed > self.moving_speed)
-        return int(moving[0, 0]) if len(moving) else self.frames
+        first = _first(speed > self.moving_speed)
+        return first if first < len(speed) else self.frames
 
     def wrist_gaps(self, person: int, joints: tuple[int, ...]) -> torch.Tensor:
         """(T, 2, len(joints)) distances from ``person``'s wrists to the partner's ``joints``."""
@@ -251,6 +251,12 @@ class Pair:
         return joints[:, list(WRISTS), 1].amax(-1) - joints[:, list(SHOULDERS), 1].mean(-1)
 
 
+def _first(flags: torch.Tensor) -> int:
+    """Index of the first True of ``flags (T,)``, T when there is none."""
+    hits = torch.nonzero(flags)
+    return int(hits[0, 0]) if len(hits) else len(flags)
+
+
 def _hand_contact(pair: Pair, arrival: float) -> dict[str, float]:
     wrists = pair.joints[:, :, list(WRISTS)]  # (T, 2, 2, 3)
     gaps = torch.linalg.vector_norm(wrists[:, 0, :, None] - wrists[:, 1, None], dim=-1)  # (T, 2, 2)
@@ -262,7 +268,7 @@ def _hand_contact(pair: Pair, arrival: float) -> dict[str, float]:
     # Who initiates: whose wrist gets near the meeting point first. Onsets of movement cannot
     # tell on a crop that starts while the actor holds the hand out and the reactor reaches.
     near = torch.linalg.vector_norm(touching - point, dim=-1) <= arrival  # (T, 2)
-    arrive = [int(torch.nonzero(near[:, p])[0, 0]) for p in (pair.a, pair.r)]
+    arrive = [_first(near[:, p]) for p in (pair.a, pair.r)]
     return {
         "hand_gap": float(gaps.min()),
         "contact_height": float(point[1] - shoulders),

@@ -14,6 +14,10 @@ One replication ``r``:
 3. for the first ``mm_replications`` replications and every generating row: MultiModality over
    ``mm_texts`` random items with ``mm_generations`` generations each.
 
+When the batches carry the synthetic dataset's action labels and the runner has a ``joints``
+function, every row whose motion has joint positions also gets interaction success (overall
+``success`` and ``success/<action>``, :mod:`intermask.metrics.success`) over the evaluation pass.
+
 The GT row runs through exactly the same code as a model row; its FID compares the two passes.
 """
 
@@ -28,7 +32,9 @@ import torch
 
 from intermask.metrics.diversity import Diversity, MultiModality
 from intermask.metrics.fid import FID
+from intermask.metrics.interaction import ACTIONS, SuccessThresholds
 from intermask.metrics.retrieval import MMDist, RPrecision
+from intermask.metrics.success import InteractionSuccess
 
 Batch = dict[str, Any]
 
@@ -79,11 +85,14 @@ class MotionSource:
 
     ``__call__(batch, seeds (B,)) -> (motion (B, 2, T, *F) de-normalized, lengths (B,) frames)``.
     ``generates``: whether MultiModality applies (False for ground truth and reconstruction).
+    ``knows_roles``: whether the batch's actor annotation names this row's actor (False for free
+    generation from a caption, where either person may act).
     ``extra_metrics`` / ``reset``: row-specific values per replication (e.g. MPJPE).
     """
 
     name: str = "source"
     generates: bool = False
+    knows_roles: bool = True
 
     def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         raise NotImplementedError
@@ -132,6 +141,20 @@ def sample_seeds(
     return torch.arange(offset, offset + count, dtype=torch.int64) + base
 
 
+Joints = Callable[[torch.Tensor], torch.Tensor | None]
+
+
+def success_labels(batch: Batch) -> tuple[torch.Tensor, torch.Tensor | None] | None:
+    """``(action_ids (B,), actors (B,) | None)`` when every item of ``batch`` names one of the
+    synthetic ``ACTIONS`` (other labels, e.g. Inter-X's A000..A039, have no predicate), else None."""
+    names = batch.get("action")
+    if names is None or not all(name in ACTIONS for name in names):
+        return None
+    action_ids = torch.tensor([ACTIONS.index(name) for name in names], dtype=torch.int64)
+    actors = batch.get("actor")
+    return action_ids, None if actors is None else torch.as_tensor(actors).long().cpu()
+
+
 def repeat_items(batch: Batch, indices: torch.Tensor, repeats: int) -> Batch:
     """A batch of ``batch``'s items ``indices``, each repeated ``repeats`` times in a row."""
     picked = indices.repeat_interleave(repeats)
@@ -150,6 +173,9 @@ class ProtocolRunner:
     loader: ``loader(epoch) -> iterable of eval batches`` (shuffled, drop_last, batch size
         ``constants.eval_batch_size``), re-drawing crops, captions and order per epoch.
     ground_truth: the source whose motion is the FID reference (de-normalized GT).
+    joints: ``motion (B, 2, T, *F) -> (B, T, 2, 22, 3)`` metres (None when the representation
+        has no positions); with it, labelled batches give every row interaction success, judged
+        with ``success_thresholds``.
     """
 
     def __init__(
@@ -163,6 +189,8 @@ class ProtocolRunner:
         multimodality: bool = True,
         generation_batch_size: int = 96,
         progress: Callable[[str], None] | None = None,
+        joints: Joints | None = None,
+        success_thresholds: SuccessThresholds | None = None,
     ) -> None:
         names = [source.name for source in sources]
         if len(set(names)) != len(names):
@@ -172,6 +200,8 @@ class ProtocolRunner:
         self.multimodality = multimodality
         self.generation_batch_size = generation_batch_size
         self.progress = progress or (lambda message: None)
+        self.joints = joints
+        self.success_thresholds = success_thresholds or SuccessThresholds()
 
     # ------------------------------------------------------------------ embeddings
     def _text_embeddings(self, batch: Batch) -> torch.Tensor:
@@ -180,6 +210,24 @@ class ProtocolRunner:
     def _motion_embeddings(self, source: MotionSource, batch: Batch, seeds) -> torch.Tensor:
         motion, lengths = source(batch, seeds)
         return self.evaluator.encode_motion(motion, lengths)
+
+    def _judge(
+        self, success: InteractionSuccess, source: MotionSource, batch: Batch, motion, lengths
+    ) -> None:
+        """Interaction success of one row's motion for a labelled batch (nothing otherwise)."""
+        labels = None if self.joints is None else success_labels(batch)
+        if labels is None:
+            return
+        joints = self.joints(motion)
+        if joints is None:  # no positions in this representation: the row shows "-"
+            return
+        action_ids, actors = labels
+        success.update(
+            joints.detach().cpu(),
+            lengths.detach().cpu().long(),
+            action_ids,
+            actors if source.knows_roles else None,
+        )
 
     # ------------------------------------------------------------------ one replication
     def _reference_embeddings(self, replication: int) -> list[torch.Tensor]:
@@ -212,6 +260,10 @@ class ProtocolRunner:
             }
             for source in self.sources
         }
+        success = {
+            source.name: InteractionSuccess(thresholds=self.success_thresholds)
+            for source in self.sources
+        }
         for row in metrics.values():
             for embedding in reference:
                 row["fid"].update(embedding, real=True)
@@ -224,7 +276,9 @@ class ProtocolRunner:
             seeds = sample_seeds(c, replication, 0, count, offset)
             offset += count
             for source in self.sources:
-                motion = self._motion_embeddings(source, batch, seeds)
+                output, lengths = source(batch, seeds)
+                motion = self.evaluator.encode_motion(output, lengths)
+                self._judge(success[source.name], source, batch, output, lengths)
                 row = metrics[source.name]
                 row["r_precision"].update(text, motion)
                 row["mm_dist"].update(text, motion)
@@ -237,6 +291,8 @@ class ProtocolRunner:
             values = {f"top{k + 1}": float(top[k]) for k in range(c.top_k)}
             values |= {name: float(row[name].compute()) for name in ("fid", "mm_dist", "diversity")}
             values |= source.extra_metrics()
+            if success[source.name].update_count:
+                values |= success[source.name].compute().as_dict()
             results[source.name] = values
         if self.multimodality and replication < c.mm_replications:
             for source in self.sources:

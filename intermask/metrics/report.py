@@ -20,13 +20,24 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("iv_cm3", "IV (cm³)", "↓"),
     ("if", "IF", "↓"),
     ("latency_ms", "Latency (ms/sample)", "↓"),
+    ("success", "Success %", "↑"),
 )
+PERCENT_COLUMNS = frozenset({"success"})  # rates kept in [0, 1] in the JSON, printed x 100
 
 
 def format_summary(summary: Summary) -> str:
     """``0.449±.004``: three decimals, the CI without its leading zero, as the paper prints."""
     ci = f"{summary.ci95:.3f}"
     return f"{summary.mean:.3f}±{ci[1:] if ci.startswith('0.') else ci}"
+
+
+def format_percent(summary: Summary) -> str:
+    """``97.3±1.2``: a rate in [0, 1] as a percentage with one decimal."""
+    return f"{100 * summary.mean:.1f}±{100 * summary.ci95:.1f}"
+
+
+def _cell(key: str, summary: Summary) -> str:
+    return format_percent(summary) if key in PERCENT_COLUMNS else format_summary(summary)
 
 
 def markdown_table(result: ProtocolResult) -> str:
@@ -46,7 +57,7 @@ def markdown_table(result: ProtocolResult) -> str:
         "|---|" + "---|" * len(present),
     ]
     for row, metrics in result.rows.items():
-        cells = [format_summary(metrics[key]) if key in metrics else "-" for key, _, _ in present]
+        cells = [_cell(key, metrics[key]) if key in metrics else "-" for key, _, _ in present]
         lines.append(f"| {row} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -1,6 +1,7 @@
 """Rows of the evaluation table: ground truth, InterMask interaction / reaction generation,
 ARFlow reactions and VQ-VAE reconstruction, each turning an eval batch into de-normalized
-two-person motion; :class:`Measured` adds penetration and latency to any of them."""
+two-person motion; :class:`Measured` adds penetration and latency to any of them;
+:func:`motion_joints` gives the protocol the joints that interaction success judges."""
 
 from __future__ import annotations
 
@@ -49,9 +50,11 @@ class GroundTruth(MotionSource):
 
 
 class InterMaskGeneration(MotionSource):
-    """Interaction generation from the batch's captions at its (rounded) GT lengths."""
+    """Interaction generation from the batch's captions at its (rounded) GT lengths; either
+    generated person may be the actor (``knows_roles`` False)."""
 
     generates = True
+    knows_roles = False
 
     def __init__(self, *, sampler: InteractionSampler, name: str = "InterMask") -> None:
         self.sampler, self.name = sampler, name
@@ -196,6 +199,16 @@ def feature_joints(features: torch.Tensor) -> torch.Tensor:
     )
 
 
+def motion_joints(motion: torch.Tensor) -> torch.Tensor | None:
+    """(B, 2, T, *F) de-normalized features -> (B, T, 2, 22, 3) joints in metres, Y up, or None
+    for a representation without positions (the protocol's ``joints``: interaction success)."""
+    try:
+        joints = feature_joints(motion.float())
+    except ValueError:
+        return None
+    return rearrange(joints, "b p t j c -> b t p j c")
+
+
 class Measured(MotionSource):
     """A row plus its Intersection Volume (cm^3 per frame), Intersection Frequency (share of
     frames over ``tolerance`` cm^3) and, with ``latency``, the wall time of the row's call per
@@ -218,6 +231,7 @@ class Measured(MotionSource):
         self.source, self.penetration, self.latency = source, penetration, latency
         self.pitch, self.tolerance = pitch, tolerance
         self.name, self.generates = source.name, source.generates
+        self.knows_roles = source.knows_roles
         self.reset()
 
     def reset(self) -> None:
