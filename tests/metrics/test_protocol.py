@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import torch
 
+from intermask.data.common import single_threaded
+from intermask.data.synthetic import generate_clip
 from intermask.metrics.protocol import (
     MotionSource,
     ProtocolConstants,
@@ -35,10 +37,11 @@ class Loader:
 
     def __init__(self, split: dict, batch_size: int):
         self.split, self.batch_size = split, batch_size
+        self.items = ITEMS
 
     def __call__(self, epoch: int):
-        order = torch.randperm(ITEMS, generator=torch.Generator().manual_seed(epoch))
-        for start in range(0, ITEMS - self.batch_size + 1, self.batch_size):
+        order = torch.randperm(self.items, generator=torch.Generator().manual_seed(epoch))
+        for start in range(0, self.items - self.batch_size + 1, self.batch_size):
             yield repeat_items(self.split, order[start : start + self.batch_size], 1)
 
 
@@ -187,3 +190,106 @@ def test_results_are_written_as_json_and_a_paper_style_table(tmp_path):
     assert "eval_batch_size=8" in table and "evaluator**: exact (0000)" in table
     assert '"Noise"' in json_path.read_text()
     assert markdown_table(result) == table
+
+
+# ---------------------------------------------------------------------- interaction success
+SUCCESS_ACTIONS = ("handshake", "wave", "push", "walk_meet")
+
+
+def _labelled_split() -> dict:
+    """8 generated clips (2 per action) as flattened joints (2, T, 66), with action labels."""
+    with single_threaded():
+        clips = [generate_clip(seed=9, index=i, action=a) for a in SUCCESS_ACTIONS for i in (0, 1)]
+    frames = max(c.frames for c in clips)
+    motion = torch.zeros(len(clips), 2, frames, 66)
+    for row, clip in enumerate(clips):
+        motion[row, :, : clip.frames] = clip.positions.flatten(2).float()
+    return {
+        "motion": motion,
+        "length": torch.tensor([c.frames for c in clips]),
+        "caption": [f"clip {i}" for i in range(len(clips))],
+        "action": [c.action for c in clips],
+        "actor": torch.tensor([c.actor for c in clips]),
+    }
+
+
+def _flat_joints(motion: torch.Tensor) -> torch.Tensor | None:
+    """(B, 2, T, 66) -> (B, T, 2, 22, 3); None for any other width (no positions)."""
+    if motion.shape[-1] != 66:
+        return None
+    return motion.unflatten(-1, (22, 3)).transpose(1, 2)
+
+
+class FrozenReactor(MotionSource):
+    name = "Frozen reactor"
+
+    def __call__(self, batch, seeds):
+        motion = batch["motion"].clone()
+        rows = torch.arange(motion.shape[0])
+        reactor = 2 - batch["actor"]  # the index of the person who is not the actor
+        motion[rows, reactor] = motion[rows, reactor, :1]
+        return motion, batch["length"]
+
+
+class SwappedGeneration(MotionSource):
+    """Persons in the other order: wrong for the annotation, right when roles are unknown."""
+
+    name, knows_roles = "Swapped", False
+
+    def __call__(self, batch, seeds):
+        return batch["motion"].flip(1), batch["length"]
+
+
+class NoPositions(MotionSource):
+    """The same numbers in a layout the joints function does not know (as Inter-X rows without
+    a body model would be)."""
+
+    name = "No positions"
+
+    def __call__(self, batch, seeds):
+        return batch["motion"].unflatten(-1, (33, 2)), batch["length"]
+
+
+class CornerEvaluator(ExactEvaluator):
+    """The first 16 numbers of the flattened motion: small embeddings, cheap FID."""
+
+    def __init__(self, split: dict):
+        super().__init__(split)
+        self.table = {c: m[:16] for c, m in self.table.items()}
+
+    def encode_motion(self, motion, lengths):
+        return motion.flatten(1)[:, :16]
+
+
+def _success_runner(split: dict, sources: list[MotionSource]) -> ProtocolRunner:
+    c = ProtocolConstants(eval_batch_size=4, replications=2, diversity_pairs=4, mm_replications=0)
+    loader = Loader(split, c.eval_batch_size)
+    loader.items = len(split["caption"])
+    return ProtocolRunner(
+        loader=loader,
+        evaluator=CornerEvaluator(split),
+        ground_truth=Truth(),
+        sources=sources,
+        constants=c,
+        joints=_flat_joints,
+    )
+
+
+def test_labelled_batches_give_every_row_with_positions_a_success_column():
+    split = _labelled_split()
+    sources = [Truth(), FrozenReactor(), SwappedGeneration(), NoPositions()]
+    result = _success_runner(split, sources).run({"dataset": "synthetic"})
+    truth, frozen, swapped = (result.rows[n] for n in ("Ground Truth", "Frozen reactor", "Swapped"))
+    assert truth["success"].mean == 1.0 and truth["success"].values == [1.0, 1.0]
+    assert frozen["success"].mean == 0.0
+    assert swapped["success"].mean == 1.0  # actor unknown: either person may act
+    assert "success" not in result.rows["No positions"]
+    assert truth["success/handshake"].mean == 1.0 and "success/hug" not in truth
+    table = markdown_table(result)
+    assert "Success % ↑" in table
+    assert table.splitlines()[-4].endswith("| 100.0±0.0 |")  # the GT row
+    assert table.splitlines()[-1].endswith("| - |")  # no positions
+    unlabelled = {k: v for k, v in split.items() if k != "action"}
+    plain = _success_runner(unlabelled, [Truth()]).run({})
+    assert "success" not in plain.rows["Ground Truth"]
+    assert "Success" not in markdown_table(plain)
