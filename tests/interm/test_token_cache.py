@@ -6,6 +6,7 @@ from functools import partial
 
 import pytest
 import torch
+from hydra import compose, initialize_config_dir
 from torch.utils.data import DataLoader
 
 from intermask.data.common import EpochSampler
@@ -16,6 +17,7 @@ from intermask.interm.module import InterMModule
 from intermask.interm.token_cache import TokenCache
 from intermask.text import TINY_MODEL_NAME, FrozenCLIPTextEncoder
 from intermask.text.cache import TextFeatureCache
+from intermask.train import CONFIG_DIR
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.quantizers import ResidualQuantizer
@@ -194,3 +196,9 @@ def test_full_cache_keeps_what_it_has():
     assert torch.equal(cache.get(first), torch.full((5, 16), 3))
     with pytest.raises(ValueError, match="max_entries must be >= 1, got 0"):
         TokenCache(codebook_size=CODEBOOK, max_entries=0)
+
+
+def test_generator_configs_switch_the_cache_on():
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose("train_gen", overrides=["experiment=gen_demo"])
+    assert cfg.model.token_cache is True
