@@ -7,10 +7,12 @@ Every quantity is a distance, a height difference, an angle to the vertical or a
 result does not change under a turn about Y or a translation (generated motion is decoded in a
 canonical frame, ground truth need not be).
 
-Each action is a conjunction of :class:`Check`\\ s: a named *signal* of the motion (``measure``)
-compared with a named threshold of :class:`SuccessThresholds`. The thresholds sit only there;
-``intermask.metrics.success.success_statistics`` measures the signals on a dataset's ground truth,
-which is where the defaults come from (see the comments on the fields).
+Each action is a conjunction of checks (:class:`Check`): a named *signal* of the motion
+(``measure``) compared with a named threshold of :class:`SuccessThresholds`. The thresholds sit
+only there; ``intermask.metrics.success_stats.success_statistics`` measures the signals on a
+dataset's ground truth, which is where the defaults come from (see the comments on the fields).
+A predicate judges the frames it is given: a crop that starts after the actor's part, or ends
+before the reactor's, can fail for the ground truth too (success-stats says how often).
 """
 
 from __future__ import annotations
