@@ -36,3 +36,16 @@ def test_report_and_command(statistics, synthetic_interhuman_root, capsys):
     assert report.startswith("GT success ") and "suggested thresholds: " in report
     assert cli(["data", "success-stats", str(synthetic_interhuman_root), "--split", "test"]) == 0
     assert capsys.readouterr().out.startswith("GT success ")
+
+
+def test_the_config_builds_the_default_thresholds():
+    from pathlib import Path
+
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    from intermask.train import CONFIG_DIR
+
+    config = OmegaConf.load(Path(CONFIG_DIR) / "success" / "synthetic.yaml")
+    assert instantiate(config) == SuccessThresholds()
+    assert instantiate(config, hand_gap=0.2).hand_gap == 0.2
