@@ -149,4 +149,6 @@ def test_ddp_over_three_processes_gives_the_single_process_rates(batch, tmp_path
     )
     single = _run(0, 1, batch)
     for rank in range(world):
-        assert torch.allclose(torch.load(tmp_path / f"rank{rank}.pt"), single, equal_nan=True)
+        assert torch.allclose(
+            torch.load(tmp_path / f"rank{rank}.pt", weights_only=True), single, equal_nan=True
+        )
