@@ -81,11 +81,14 @@ def test_eval_job_writes_the_table(synthetic_interhuman_root, runs, tmp_path, mo
     assert (mode == "reconstruction") == ("mpjpe_mm" in model)
     assert truth["if"]["mean"] >= 0 and model["iv_cm3"]["mean"] >= 0  # penetration on every row
     assert "latency_ms" in model and "latency_ms" not in truth
+    # synthetic items carry action labels: interaction success on every row, per action in JSON
+    assert truth["success"]["mean"] >= 0.95 and 0.0 <= model["success"]["mean"] <= 1.0
+    assert any(name.startswith("success/") for name in model)
     header = result["header"]
     assert header["fast"] and header["evaluator"].startswith("interclip[trained:synthetic]")
     assert len(header["constants"]) > 10 and header["mode"] == mode
     table = (tmp_path / "results.md").read_text()
-    assert "FAST MODE" in table and f"| {model_row} |" in table
+    assert "FAST MODE" in table and f"| {model_row} |" in table and "Success % ↑" in table
     assert (
         json.loads((tmp_path / "results.json").read_text())["rows"].keys() == result["rows"].keys()
     )
