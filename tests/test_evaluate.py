@@ -228,3 +228,50 @@ def test_interaction_table_can_show_the_generators_tokenizer_beside_it(
     reconstruction = rows["VQ-VAE reconstruction"]
     # the generator's own VQ-VAE: joint error measured, nothing generated so no latency
     assert reconstruction["mpjpe_mm"]["mean"] > 0 and "latency_ms" not in reconstruction
+
+
+def test_periodic_protocol_logs_quality_during_generator_training(
+    synthetic_interhuman_root, runs, tmp_path
+):
+    cfg = _gen_config(synthetic_interhuman_root, runs["vq"], tmp_path)
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        callbacks = compose(
+            "train_gen",
+            overrides=[
+                "callbacks=[default,protocol]",
+                f"callbacks.protocol.evaluator={runs['evaluator']}",
+                "callbacks.protocol.split=train",  # the 48-clip fixture's val split is tiny
+                "callbacks.protocol.iterations=2",
+                "callbacks.protocol.constants.eval_batch_size=8",
+                "callbacks.protocol.constants.diversity_pairs=8",
+                "vq_ckpt=unused",
+            ],
+        ).callbacks
+    with open_dict(cfg):
+        cfg.callbacks = callbacks
+        cfg.callbacks.rich_progress_bar = None
+        cfg.callbacks.sample_animations = None
+    metrics = train(cfg)
+    for name in ("top1", "top3", "fid", "mm_dist", "diversity", "gt_top3"):
+        assert np.isfinite(metrics[f"protocol/{name}"]), name
+    assert 0.0 <= metrics["protocol/top1"] <= metrics["protocol/top3"] <= 1.0
+    assert metrics["protocol/fid"] > 0.0  # an untrained generator is not the GT
+    assert 0.0 <= metrics["protocol/success"] <= 1.0 and metrics["protocol/gt_success"] > 0.5
+    assert 0.0 < metrics["protocol/hours"] < 1.0
+
+
+def test_periodic_protocol_rejects_bad_settings(tmp_path):
+    from callbacks.protocol import PeriodicProtocol
+    from intermask.metrics.protocol import ProtocolConstants
+
+    with pytest.raises(FileNotFoundError, match="missing.ckpt: evaluator checkpoint not found"):
+        PeriodicProtocol(evaluator=str(tmp_path / "missing.ckpt"), constants=ProtocolConstants())
+    (tmp_path / "e.ckpt").write_bytes(b"")
+    with pytest.raises(ValueError, match="every_n_epochs and iterations must be >= 1, got 0"):
+        PeriodicProtocol(
+            evaluator=str(tmp_path / "e.ckpt"), constants=ProtocolConstants(), every_n_epochs=0
+        )
+    with pytest.raises(ValueError, match="split must be 'train', 'val' or 'test', got 'dev'"):
+        PeriodicProtocol(
+            evaluator=str(tmp_path / "e.ckpt"), constants=ProtocolConstants(), split="dev"
+        )
