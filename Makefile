@@ -17,7 +17,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo tb clean
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo overfit tb clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -105,6 +105,11 @@ demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator,
 	@echo; cat $(DEMO_DIR)/eval/results.md
 	@echo; echo "demo done: table $(DEMO_DIR)/eval/results.md; checkpoints $(DEMO_DIR)/{evaluator,vq,gen}/checkpoints;" \
 		"samples $(DEMO_DIR)/samples/*/{animation.gif,viewer.html}; logs: make tb LOGDIR=$(DEMO_DIR)"
+
+OVERFIT_DIR ?= outputs/overfit
+
+overfit: install ## memorisation check: VQ-VAE + Inter-M on 14 clips (one per action), then all 14 captions must succeed
+	$(PY) -m intermask.overfit --out $(OVERFIT_DIR) $(ARGS)
 
 tb: install ## TensorBoard over all runs: make tb [LOGDIR=outputs]
 	$(VENV)/bin/tensorboard --logdir $(or $(LOGDIR),outputs) --bind_all
