@@ -47,7 +47,7 @@ class ClipResult:
     caption: str
     frames: int
     success: bool
-    mpjpe_m: float  # mean joint error of the generated pair against the clip, both persons
+    mpjpe_m: float  # joint error against the clip (both persons, best order, aligned on the ground)
 
 
 @dataclass(frozen=True)
@@ -99,13 +99,45 @@ def _compose(config: str, output_dir: Path, overrides: Sequence[str]) -> DictCon
     return cfg
 
 
+def _align_on_ground(
+    moving: torch.Tensor, fixed: torch.Tensor, valid: torch.Tensor
+) -> torch.Tensor:
+    """(B, T, P, J, 3) ``moving`` turned about Y and shifted in XZ to best fit ``fixed`` (least
+    squares over the ``valid`` (B, T) frames: the 2D Kabsch solution); heights are kept."""
+    weight = valid[:, :, None, None].to(moving.dtype)  # (B, T, 1, 1)
+    count = weight.sum(dim=(1, 2, 3)).clamp_min(1) * moving.shape[2] * moving.shape[3]
+    p, q = moving[..., [0, 2]], fixed[..., [0, 2]]  # (B, T, P, J, 2) ground-plane coordinates
+    p_mean = (p * weight[..., None]).sum(dim=(1, 2, 3)) / count[:, None]  # (B, 2)
+    q_mean = (q * weight[..., None]).sum(dim=(1, 2, 3)) / count[:, None]
+    pc = (p - p_mean[:, None, None, None]) * weight[..., None]
+    qc = q - q_mean[:, None, None, None]
+    # angle maximising sum q . R p for R = [[cos, -sin], [sin, cos]]
+    sine = (qc[..., 1] * pc[..., 0] - qc[..., 0] * pc[..., 1]).sum(dim=(1, 2, 3))
+    cosine = (qc[..., 0] * pc[..., 0] + qc[..., 1] * pc[..., 1]).sum(dim=(1, 2, 3))
+    angle = torch.atan2(sine, cosine)[:, None, None, None]  # (B, 1, 1, 1)
+    x, z = p[..., 0] - p_mean[:, None, None, None, 0], p[..., 1] - p_mean[:, None, None, None, 1]
+    aligned = moving.clone()
+    aligned[..., 0] = angle.cos() * x - angle.sin() * z + q_mean[:, None, None, None, 0]
+    aligned[..., 2] = angle.sin() * x + angle.cos() * z + q_mean[:, None, None, None, 1]
+    return aligned
+
+
 def _clip_errors(
     generated: torch.Tensor, real: torch.Tensor, lengths: torch.Tensor
 ) -> torch.Tensor:
-    """(B, T, 2, 22, 3) joints of both -> (B,) MPJPE over the valid frames and both persons."""
-    frames = torch.arange(real.shape[1])[None, :] < lengths[:, None]  # (B, T)
-    error = (generated - real).norm(dim=-1).mean(dim=(-1, -2))  # (B, T)
-    return (error * frames).sum(1) / frames.sum(1)
+    """(B, T, 2, 22, 3) joints of both -> (B,) MPJPE over the valid frames and both persons,
+    for the better of the two person orders after a turn about Y and a ground-plane shift.
+
+    Inter-M has no person embedding, so "person 1" of a sample may be either clip person, and
+    each pair is decoded in its first person's canonical frame: the order and that frame are
+    not errors."""
+    valid = torch.arange(real.shape[1])[None, :] < lengths[:, None]  # (B, T)
+    errors = []
+    for order in ([0, 1], [1, 0]):
+        aligned = _align_on_ground(generated[:, :, order], real, valid)
+        error = (aligned - real).norm(dim=-1).mean(dim=(-1, -2))  # (B, T)
+        errors.append((error * valid).sum(1) / valid.sum(1))
+    return torch.stack(errors).amin(dim=0)
 
 
 def check_generation(

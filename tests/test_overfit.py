@@ -23,12 +23,29 @@ def test_memorisation_set_has_one_clip_per_action_in_every_split(tmp_path):
 
 
 def test_clip_errors_average_valid_frames_of_both_persons():
-    real = torch.zeros(2, 6, 2, 22, 3)
+    real = torch.rand(2, 6, 2, 22, 3)
     generated = real.clone()
-    generated[0, :, 0, :, 0] = 0.1  # person 1 of sample 0 off by 10 cm everywhere
+    generated[0, :, 0, :, 1] += 0.1  # person 1 of sample 0 10 cm too high everywhere
     generated[1, 4:] = 5.0  # sample 1 wrong only beyond its length
     errors = _clip_errors(generated, real, torch.tensor([6, 4]))
-    torch.testing.assert_close(errors, torch.tensor([0.05, 0.0]))
+    torch.testing.assert_close(errors, torch.tensor([0.05, 0.0]), atol=1e-5, rtol=0)
+
+
+def test_clip_errors_ignore_person_order_and_the_ground_frame():
+    real = torch.rand(1, 5, 2, 22, 3)
+    turn = torch.tensor(1.2)
+    rotation = torch.tensor(
+        [[turn.cos(), 0.0, turn.sin()], [0.0, 1.0, 0.0], [-turn.sin(), 0.0, turn.cos()]]
+    )
+    moved = real.flip(2) @ rotation.T + torch.tensor([2.0, 0.0, -1.0])  # swapped, turned, shifted
+    torch.testing.assert_close(
+        _clip_errors(moved, real, torch.tensor([5])), torch.zeros(1), atol=1e-5, rtol=0
+    )
+    raised = moved.clone()
+    raised[..., 1] += 0.2  # heights are not aligned away
+    torch.testing.assert_close(
+        _clip_errors(raised, real, torch.tensor([5])), torch.tensor([0.2]), atol=1e-5, rtol=0
+    )
 
 
 def test_report_table_counts_successes_and_flags_failures():

@@ -32,6 +32,7 @@ EXPERIMENTS = {
     "gen_ablation_no_step_unroll_no_interaction_masking": {"p_random": 1.0, "step_unroll": False},
 }
 CPU_SETTINGS = {"gen_demo"}  # CPU-sized: paper switches, not paper sizes (tested below)
+SYNTHETIC_SETTINGS = {"gen_synthetic_long"}  # the paper network on the demo's data (tested below)
 TINY_NET = {
     "codebook_size": 16,
     "width": 32,
@@ -56,7 +57,28 @@ def _compose(experiment: str):
 
 def test_every_gen_experiment_file_is_covered():
     files = {path.stem for path in Path(CONFIG_DIR, "experiment").glob("gen_*.yaml")}
-    assert files == set(EXPERIMENTS) | CPU_SETTINGS
+    assert files == set(EXPERIMENTS) | CPU_SETTINGS | SYNTHETIC_SETTINGS
+
+
+def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose(
+            "train_gen",
+            overrides=[
+                "experiment=gen_synthetic_long",
+                "vq_ckpt=unused",
+                "callbacks.protocol.evaluator=unused.ckpt",
+                "paths.output_dir=/tmp/x",
+            ],
+        )
+    landed = {key: cfg.model[key] if key in cfg.model else cfg.model.net[key] for key in PAPER}
+    assert landed == PAPER
+    net = cfg.model.net
+    assert (net.width, net.heads, net.depth, net.ff, net.dropout) == (384, 6, 6, 1024, 0.2)
+    assert cfg.data.max_length == 96 and net.codebook_size == 512  # the demo's crops and tokens
+    assert cfg.trainer.max_epochs == 500 and cfg.trainer.accelerator == "gpu"
+    assert cfg.callbacks.protocol.every_n_epochs == 10
+    assert cfg.callbacks.model_checkpoint.monitor == "protocol/fid"
 
 
 def test_demo_setting_keeps_the_paper_switches_on_a_cpu_sized_network():
