@@ -1,4 +1,4 @@
-"""InterHuman reader for the official layout (see /work/shared/design/data-formats.md).
+"""InterHuman reader for the official layout (the README's Data section).
 
     <root>/annots/<id>.txt                       captions, one per line
     <root>/motions_processed/person{1,2}/<id>.npy float32 (T, 492), Z-up

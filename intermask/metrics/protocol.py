@@ -1,7 +1,7 @@
 """The multi-replication evaluation protocol (InterGen / InterMask convention).
 
 Every constant is a field of :class:`ProtocolConstants` (filled from ``configs/protocol/``) and is
-printed in the results header; /work/shared/design/eval-protocol.md lists their sources.
+printed in the results header; each config file in configs/protocol/ cites its source.
 
 One replication ``r``:
 

@@ -84,7 +84,9 @@ def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
 def test_demo_setting_keeps_the_paper_switches_on_a_cpu_sized_network():
     cfg = _compose("gen_demo")
     landed = {key: cfg.model[key] if key in cfg.model else cfg.model.net[key] for key in PAPER}
-    assert landed == PAPER
+    # the demo trains without the step-unroll pass: at its CPU budget the measured run without it
+    # had the better top-3 and success (docs/learning.md); every other paper switch stays on
+    assert landed == {**PAPER, "step_unroll": False}
     assert cfg.trainer.accelerator == "cpu" and cfg.text.encoder.pretrained is None
     assert cfg.model.net.text_dim == 64 and cfg.model.net.codebook_size == 512  # tiny text, vq_demo
 
