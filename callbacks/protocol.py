@@ -13,7 +13,6 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterator
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -114,7 +113,7 @@ class PeriodicProtocol(Callback):
             evaluator=evaluator,
             ground_truth=ground_truth,
             sources=[ground_truth, generated],
-            constants=replace(self.constants),
+            constants=self.constants,
             multimodality=False,
             joints=motion_joints,
             success_thresholds=self.success,
@@ -129,11 +128,4 @@ class PeriodicProtocol(Callback):
         values["gt_top3"] = truth["top3"].mean
         if "success" in truth:
             values["gt_success"] = truth["success"].mean
-        return {
-            name: value
-            for name, value in values.items()
-            if name.split("/")[0] in _LOGGED or name.startswith("gt_")
-        }
-
-
-_LOGGED = ("top1", "top2", "top3", "fid", "mm_dist", "diversity", "success")
+        return values

@@ -153,11 +153,9 @@ def check_generation(
     lengths = lengths - lengths % FRAMES_PER_STEP
     captions = [item["caption"] for item in items]
     generated = sampler(captions, lengths, seeds=[seed + i for i in range(len(items))])
-    frames = generated.joints.shape[1]
-    real = joints_from_features(sampler.vq, motion[:, :, :frames].float())
-    real_joints = real.new_zeros(generated.joints.shape)
-    real_joints[:, : real.shape[1]] = real
-    errors = _clip_errors(generated.joints, real_joints, generated.lengths)
+    frames = generated.joints.shape[1]  # the longest length, rounded down to whole tokens
+    real = joints_from_features(sampler.vq, motion[:, :, :frames].float())  # (B, frames, 2, 22, 3)
+    errors = _clip_errors(generated.joints, real, generated.lengths)
     action_ids = torch.tensor([int(item["action_id"]) for item in items])
     success = interaction_success(generated.joints, generated.lengths, action_ids)
     return [

@@ -22,22 +22,9 @@ from typing import NamedTuple
 
 import torch
 
-ACTIONS: tuple[str, ...] = (  # action id = position (as intermask.data.synthetic.ACTIONS)
-    "handshake",
-    "hug",
-    "push",
-    "punch_dodge",
-    "wave",
-    "bow",
-    "walk_meet",
-    "dance",
-    "pass_object",
-    "high_five",
-    "kick_block",
-    "chase",
-    "pat_shoulder",
-    "beckon",
-)
+# action id = position; the synthetic dataset that writes the labels owns the list
+from intermask.data.synthetic.clips import ACTIONS
+
 NUM_JOINTS = 22
 PELVIS, L_HIP, R_HIP, L_ANKLE, R_ANKLE, CHEST, NECK, HEAD = 0, 1, 2, 7, 8, 9, 12, 15
 SHOULDERS, WRISTS = (16, 17), (20, 21)
