@@ -6,7 +6,6 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from intermask.evaluator.checkpoints import (
@@ -24,6 +23,7 @@ from intermask.evaluator.gru_matcher import GRUMatcher
 from intermask.evaluator.interclip import InterCLIP
 from intermask.evaluator.vocabulary import DEFAULT_GLOVE_PREFIX
 from intermask.utils.files import run_config_path
+from intermask.utils.run_config import instantiate_from_run
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +110,7 @@ def _from_run(
                 raise ValueError(f"{path}: no '{VOCABULARY_KEY}' entry (the GRU matcher's words)")
             net_cfg.vocabulary = list(checkpoint[VOCABULARY_KEY])
             net_cfg.glove_dir = None  # the vectors are in the state dict
-    net = instantiate(net_cfg)
+    net = instantiate_from_run(net_cfg, source=config_path, section="model.net")
     state = {
         k.removeprefix("net."): v
         for k, v in checkpoint["state_dict"].items()

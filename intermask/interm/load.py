@@ -12,6 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 from intermask.interm.model import InterMTransformer
 from intermask.text.cache import TextFeatureCache
 from intermask.utils.files import resolve_checkpoint, run_config_path
+from intermask.utils.run_config import check_targets
 from intermask.vq.load import load_vq
 from intermask.vq.model import MotionVQVAE
 
@@ -39,16 +40,19 @@ def load_generator(
     config = OmegaConf.load(config_path)
     if "vq_ckpt" not in config or "net" not in config.get("model", {}):
         raise ValueError(f"{config_path}: not a train_gen run config (no vq_ckpt / model.net)")
+    # both sections are checked before anything is built or read
+    net_config = check_targets(config.model.net, source=config_path, section="model.net")
+    text_config = check_targets(config.text, source=config_path, section="text")
     vq_path = Path(vq_checkpoint or config.vq_ckpt)
     if not vq_path.is_file():
         raise FileNotFoundError(
             f"{vq_path}: the generator's VQ checkpoint (from {config_path}) is missing; pass "
             "vq_checkpoint= to point to it"
         )
-    net = instantiate(config.model.net)
+    net = instantiate(net_config)
     state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
     net.load_state_dict({k.removeprefix("net."): v for k, v in state.items()})
-    text = instantiate(config.text)
+    text = instantiate(text_config)
     return LoadedGenerator(
         net.eval().requires_grad_(False),
         load_vq(vq_path, map_location=map_location),

@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import torch
-from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from intermask.reaction.module import ARFlowModule
 from intermask.utils.files import resolve_checkpoint, run_config_path
+from intermask.utils.run_config import instantiate_from_run
 
 
 def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowModule:
@@ -26,7 +26,7 @@ def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowM
         raise ValueError(
             f"{config_path}: not a train_arflow run config (model is not ARFlowModule)"
         )
-    module: ARFlowModule = instantiate(model_config)
+    module: ARFlowModule = instantiate_from_run(model_config, source=config_path, section="model")
     state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
     module.load_state_dict(state)
     return module.eval().requires_grad_(False)

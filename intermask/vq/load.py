@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import torch
-from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from intermask.utils.files import run_config_path
+from intermask.utils.run_config import instantiate_from_run
 from intermask.vq.model import MotionVQVAE
 
 
@@ -22,7 +22,9 @@ def load_vq(checkpoint: str | Path, *, map_location: str = "cpu") -> MotionVQVAE
     if not checkpoint.is_file():
         raise FileNotFoundError(f"{checkpoint}: VQ checkpoint not found")
     config_path = run_config_path(checkpoint, kind="VQ")
-    net = instantiate(OmegaConf.load(config_path).model.net)
+    net = instantiate_from_run(
+        OmegaConf.load(config_path).model.net, source=config_path, section="model.net"
+    )
     state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
     net.load_state_dict(
         {k.removeprefix("net."): v for k, v in state.items() if k.startswith("net.")}
