@@ -21,7 +21,6 @@ the crop anywhere in the clip.
 
 from __future__ import annotations
 
-import pickle
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,6 +48,7 @@ from intermask.data.errors import DataError, SkippedClip
 from intermask.data.normalization import Normalizer
 from intermask.data.windows import build_window_index
 from intermask.motion.interx import NUM_ROWS, RAW_CHANNELS, person_representation, split_persons
+from intermask.utils.plain_pickle import UnsafePickle, load_plain_pickle
 
 Mode = Literal["interaction", "window"]
 Crop = Literal["random", "start"]
@@ -126,17 +126,14 @@ def read_order(path: Path) -> dict[str, int] | None:
     if not path.is_file():
         return None
     try:
-        with open(path, "rb") as fh:
-            order = pickle.load(fh)
+        order = load_plain_pickle(path)  # a dataset file: read without running code
+    except UnsafePickle as err:
+        raise DataError(f"{err} (expected a pickled dict name -> 0|1)") from err
+    except (OSError, ValueError) as err:
+        raise DataError(f"{path}: expected a pickled dict name -> 0|1 ({err})") from err
+    try:
         return {str(k): int(v) for k, v in order.items()}
-    except (
-        OSError,
-        pickle.UnpicklingError,
-        EOFError,
-        AttributeError,
-        TypeError,
-        ValueError,
-    ) as err:
+    except (AttributeError, TypeError, ValueError) as err:
         raise DataError(f"{path}: expected a pickled dict name -> 0|1 ({err!r})") from err
 
 

@@ -18,7 +18,6 @@ Word vectors come from one of two places:
 
 from __future__ import annotations
 
-import pickle
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -26,6 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 import torch
+
+from intermask.utils.plain_pickle import UnsafePickle, load_plain_pickle
 
 # T2M's POS classes, in one-hot order (text-to-motion word_vectorizer.py)
 POS_CLASSES = (
@@ -147,29 +148,13 @@ class Vocabulary:
         return EncodedTokens(ids, pos, lengths)
 
 
-class _ListDictUnpickler(pickle.Unpickler):
-    """GloVe word lists and indices are plain lists/dicts: refuse anything that runs code."""
-
-    _ALLOWED = {
-        ("numpy", "dtype"),
-        ("numpy.core.multiarray", "scalar"),
-        ("numpy._core.multiarray", "scalar"),
-    }
-
-    def find_class(self, module: str, name: str):
-        if (module, name) in self._ALLOWED:
-            return super().find_class(module, name)
-        raise pickle.UnpicklingError(f"refusing to load {module}.{name} from a word list")
-
-
 def _load_pickle(path: Path):
     if not path.is_file():
         raise FileNotFoundError(f"{path}: GloVe file not found")
-    with open(path, "rb") as file:
-        try:
-            return _ListDictUnpickler(file).load()
-        except (pickle.UnpicklingError, EOFError, ValueError) as error:
-            raise ValueError(f"{path}: not a plain pickled list/dict ({error})") from error
+    try:
+        return load_plain_pickle(path)
+    except (UnsafePickle, ValueError) as error:  # the message names the file
+        raise ValueError(f"not a plain pickled list/dict: {error}") from error
 
 
 def load_glove(

@@ -11,6 +11,7 @@ from builders import CAPTIONS, write_interx
 from intermask.data.errors import DataError
 from intermask.data.interx import InterXDataset
 from intermask.data.normalization import Normalizer
+from intermask.data.validation import check_dataset
 from intermask.data.windows import window_count
 from intermask.motion.rotations import axis_angle_to_rot6d
 
@@ -278,3 +279,34 @@ def test_invalid_arguments(small):
         InterXDataset(root=small, split="train", crop="middle")
     with pytest.raises(ValueError, match=r"normalizer must have shape \(56, 6\)"):
         InterXDataset(root=small, split="train", normalizer=Normalizer.identity((262,)))
+
+
+class _Payload:
+    """A pickle that writes a marker file when unpickled with ``pickle.load``."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (exec, (f"open({self.marker!r}, 'w').write('ran')",))
+
+
+def test_a_payload_in_the_order_file_is_refused_without_running(small, tmp_path_factory):
+    marker = tmp_path_factory.mktemp("payload") / "marker"
+    order_file = small / "annots" / "interaction_order.pkl"
+    order_file.write_bytes(pickle.dumps({"G001T000A000R000": _Payload(marker)}))
+    with pytest.raises(DataError) as refused:
+        InterXDataset(root=small, split="train")
+    assert str(order_file) in str(refused.value)
+    assert "refusing to load builtins.exec" in str(refused.value)
+    problems = [str(p) for p in check_dataset(small, "interx")]  # `intermask data check`
+    assert any(str(order_file) in p and "builtins.exec" in p for p in problems), problems
+    assert not marker.exists()
+
+
+def test_numpy_values_in_the_order_file_still_read(small):
+    order_file = small / "annots" / "interaction_order.pkl"
+    order = pickle.loads(order_file.read_bytes())
+    order_file.write_bytes(pickle.dumps({k: np.int64(v) for k, v in order.items()}))
+    dataset = InterXDataset(root=small, split="train")
+    assert len(dataset) > 0
