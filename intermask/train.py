@@ -52,9 +52,32 @@ def decide_precision(cfg: DictConfig) -> PrecisionChoice:
     return choice
 
 
+def resume_checkpoint(ckpt_path: str | None, *, allow_remote: bool = False) -> str | None:
+    """The checkpoint to resume from, checked: a local file (named in the error when missing),
+    or a URL only with ``allow_remote``. Either way it is read with ``weights_only=True``
+    (see :func:`train`), which no environment variable overrides."""
+    if ckpt_path is None:
+        return None
+    ckpt_path = str(ckpt_path)
+    if "://" in ckpt_path:
+        if not allow_remote:
+            raise ValueError(
+                f"ckpt_path={ckpt_path}: refusing to resume from a URL; download the file and "
+                "pass its path, or set allow_remote_ckpt=true (it is still read with "
+                "weights_only=True)"
+            )
+        return ckpt_path
+    if not Path(ckpt_path).is_file():
+        raise FileNotFoundError(f"ckpt_path={ckpt_path}: no such checkpoint file to resume from")
+    return ckpt_path
+
+
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit the configured model on the configured data; returns the final callback metrics."""
     L.seed_everything(cfg.seed, workers=True)
+    ckpt_path = resume_checkpoint(
+        cfg.get("ckpt_path"), allow_remote=bool(cfg.get("allow_remote_ckpt", False))
+    )
     output_dir = Path(cfg.paths.output_dir)
     precision = decide_precision(cfg)
     write_run_record(
@@ -71,7 +94,9 @@ def train(cfg: DictConfig) -> dict[str, float]:
         callbacks=instantiate_all(cfg.get("callbacks")),
         logger=instantiate_all(cfg.get("logger")) or False,
     )
-    trainer.fit(model, datamodule=datamodule, ckpt_path=cfg.get("ckpt_path"))
+    # weights_only=True explicitly: torch.load then ignores TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD, and
+    # Lightning's remote default (weights_only=False) never applies
+    trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
     metrics = {name: float(value) for name, value in trainer.callback_metrics.items()}
     log.info("final metrics: %s", metrics)
     return metrics
