@@ -14,6 +14,7 @@ import lightning as L
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from intermask.utils.checkpoint_io import AtomicCheckpointIO
 from intermask.utils.precision import PrecisionChoice, resolve_precision
 from intermask.utils.run_record import write_run_record
 
@@ -93,6 +94,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
         cfg.trainer,
         callbacks=instantiate_all(cfg.get("callbacks")),
         logger=instantiate_all(cfg.get("logger")) or False,
+        plugins=[AtomicCheckpointIO()],  # a kill mid-write never leaves a broken last.ckpt
     )
     # weights_only=True explicitly: torch.load then ignores TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD, and
     # Lightning's remote default (weights_only=False) never applies

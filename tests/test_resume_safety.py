@@ -10,6 +10,7 @@ import torch
 from test_train_vq import _config
 
 from intermask.train import resume_checkpoint, train
+from intermask.utils.checkpoint_files import CorruptCheckpoint
 
 
 class _Payload:
@@ -45,3 +46,12 @@ def test_a_pickled_payload_is_refused_even_when_the_environment_asks_for_full_un
     with pytest.raises(pickle.UnpicklingError, match="Weights only load failed"):
         train(cfg)
     assert not marker.exists()
+
+
+def test_a_truncated_checkpoint_is_refused_by_name(synthetic_interhuman_root, tmp_path):
+    broken = tmp_path / "last.ckpt"
+    torch.save({"state_dict": {"w": torch.zeros(10_000)}}, broken)
+    broken.write_bytes(broken.read_bytes()[:-5000])
+    cfg = _config(synthetic_interhuman_root, tmp_path / "run", [f"ckpt_path={broken}"])
+    with pytest.raises(CorruptCheckpoint, match=rf"{broken}: not a readable checkpoint"):
+        train(cfg)

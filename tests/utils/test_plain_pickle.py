@@ -31,7 +31,9 @@ def test_a_payload_is_refused_naming_the_file_and_never_runs(tmp_path, protocol)
     marker = tmp_path / "marker"
     path = tmp_path / "evil.pkl"
     path.write_bytes(pickle.dumps({"k": _Payload(marker)}, protocol=protocol))
-    with pytest.raises(UnsafePickle, match=rf"{path}: refusing to load (__builtin__|builtins).exec"):
+    with pytest.raises(
+        UnsafePickle, match=rf"{path}: refusing to load (__builtin__|builtins).exec"
+    ):
         load_plain_pickle(path)
     assert not marker.exists()
 
