@@ -73,6 +73,23 @@ def resume_checkpoint(ckpt_path: str | None, *, allow_remote: bool = False) -> s
     return ckpt_path
 
 
+def resolve_monitor(cfg: DictConfig, model: L.LightningModule) -> None:
+    """``monitor: auto`` of the best-checkpoint callback -> the module's ``checkpoint_metric``
+    (in place, logged), so the selection metric is one the module logs for this dataset."""
+    checkpoint = (cfg.get("callbacks") or {}).get("model_checkpoint")
+    if checkpoint is None or checkpoint.get("monitor") != "auto":
+        return
+    metric = getattr(model, "checkpoint_metric", None)
+    if metric is None:
+        raise ValueError(
+            f"callbacks.model_checkpoint.monitor=auto: {type(model).__name__} names no "
+            "checkpoint_metric; set the monitor explicitly"
+        )
+    with open_dict(cfg):
+        cfg.callbacks.model_checkpoint.monitor = metric
+    log.info("best checkpoint by %s", metric)
+
+
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit the configured model on the configured data; returns the final callback metrics."""
     L.seed_everything(cfg.seed, workers=True)
@@ -81,11 +98,12 @@ def train(cfg: DictConfig) -> dict[str, float]:
     )
     output_dir = Path(cfg.paths.output_dir)
     precision = decide_precision(cfg)
+    datamodule = instantiate(cfg.data)
+    model = instantiate(cfg.model)
+    resolve_monitor(cfg, model)
     write_run_record(
         output_dir, cfg, extra={"job": cfg.task_name, "precision": precision.as_record()}
     )
-    datamodule = instantiate(cfg.data)
-    model = instantiate(cfg.model)
     total, trainable = count_parameters(model)
     log.info(
         "%s: %.2fM parameters (%.2fM trainable)", type(model).__name__, total / 1e6, trainable / 1e6

@@ -111,3 +111,38 @@ def test_resume_from_last_continues_steps_and_schedule(synthetic_interhuman_root
     assert (
         resumed["lr_schedulers"][0] == reference["lr_schedulers"][0]
     )  # same point of the same schedule
+
+
+def test_train_vq_on_interx_selects_by_reconstruction_and_writes_checkpoints(
+    synthetic_interx_root, tmp_path, caplog
+):
+    # the Inter-X view has no positions without a body model, so no val/mpjpe_mm: `monitor: auto`
+    # selects by val/reconstruction (a fixed val/mpjpe_mm ended every Inter-X run at epoch 0)
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose(
+            "train_vq",
+            overrides=[
+                "data=synthetic_interx",
+                f"data.root={synthetic_interx_root}",
+                "data.batch_size=16",
+                "data.num_workers=0",
+                "model.net.encoder.width=16",
+                "model.net.quantizer.codebook_size=32",
+                "trainer=cpu",
+                "trainer.max_epochs=2",
+                "trainer.limit_train_batches=2",
+                "trainer.limit_val_batches=1",
+                "callbacks.rich_progress_bar=null",
+            ],
+        )
+    with open_dict(cfg):
+        cfg.paths.output_dir = str(tmp_path)
+    with caplog.at_level("INFO", logger="intermask.train"):
+        metrics = train(cfg)
+    assert "best checkpoint by val/reconstruction" in caplog.text
+    assert "val/mpjpe_mm" not in metrics and metrics["val/reconstruction"] > 0
+    names = sorted(p.name for p in (tmp_path / "checkpoints").iterdir())
+    assert names[-1] == "last.ckpt" and names[0].startswith("best-epoch")
+    assert _last(tmp_path)["global_step"] == 4
+    saved = (tmp_path / "config.yaml").read_text()
+    assert "monitor: val/reconstruction" in saved  # the run's config says what was used
