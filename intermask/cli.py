@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import pickle
 import sys
 import time
 from collections.abc import Sequence
@@ -304,8 +305,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)
-    except (FileNotFoundError, FileExistsError, ValueError) as error:
-        # Data problems are user errors: one clear line, no traceback.
+    except (FileNotFoundError, FileExistsError, ValueError, pickle.UnpicklingError) as error:
+        # Data and checkpoint problems are user errors: one clear line naming the file.
         print(f"intermask {args.command}: error: {error}", file=sys.stderr)
         return 2
 

@@ -97,3 +97,45 @@ def test_load_vq_names_what_is_missing(tmp_path):
         FileNotFoundError, match=r"run/config.yaml: the run config of the VQ checkpoint is missing"
     ):
         load_vq(lonely)
+
+
+def test_a_generator_refuses_a_tokenizer_it_was_not_trained_on(
+    synthetic_interhuman_root, vq_checkpoint, tmp_path
+):
+    from types import SimpleNamespace
+
+    from intermask.interm.load import check_vq_matches, load_generator
+
+    train(_gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path / "gen"))
+    loaded = load_generator(tmp_path / "gen")  # its own tokenizer: fine
+    assert loaded.vq_checkpoint == vq_checkpoint
+    # the same architecture with other weights (another run, or a later epoch of it)
+    other_run = tmp_path / "other_vq"
+    (other_run / "checkpoints").mkdir(parents=True)
+    (other_run / "config.yaml").write_text(
+        (vq_checkpoint.parent.parent / "config.yaml").read_text()
+    )
+    stored = torch.load(vq_checkpoint, map_location="cpu", weights_only=True)
+    codebook = next(k for k in stored["state_dict"] if "codebook" in k)
+    stored["state_dict"][codebook] = stored["state_dict"][codebook] + 0.5
+    torch.save(stored, other_run / "checkpoints" / "last.ckpt")
+    with pytest.raises(ValueError, match=r"last.ckpt: not the VQ-VAE .* was trained on"):
+        load_generator(tmp_path / "gen", vq_checkpoint=other_run / "checkpoints" / "last.ckpt")
+    # another codebook size or token layout
+    for codes, rows in ((64, 5), (32, 1)):
+        net = SimpleNamespace(codebook_size=codes, rows=rows)
+        with pytest.raises(
+            ValueError, match=rf"with 32 codes x 5 rows cannot decode .*{codes} codes x {rows} rows"
+        ):
+            check_vq_matches(net, loaded.vq, {}, Path("gen.ckpt"), vq_checkpoint)
+    # resuming the run with the other tokenizer is refused too
+    resume = _gen_config(
+        synthetic_interhuman_root, other_run / "checkpoints" / "last.ckpt", tmp_path / "resumed"
+    )
+    with open_dict(resume):
+        resume.ckpt_path = str(tmp_path / "gen" / "checkpoints" / "last.ckpt")
+        resume.trainer.max_epochs = 2
+    with pytest.raises(
+        ValueError, match="the checkpoint was trained on the VQ-VAE with weights digest"
+    ):
+        train(resume)

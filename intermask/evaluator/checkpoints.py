@@ -24,6 +24,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from intermask.utils.checkpoint_files import read_checkpoint_file
 from intermask.utils.files import file_hash as file_hash  # re-exported
 
 log = logging.getLogger(__name__)
@@ -71,12 +72,12 @@ def read_checkpoint(path: str | Path, *, trusted: bool = False, map_location: st
     if not path.is_file():
         raise FileNotFoundError(f"{path}: evaluator checkpoint not found")
     try:
-        return torch.load(path, map_location=map_location, weights_only=True)
+        return read_checkpoint_file(path, map_location=map_location)  # corrupt files: named
     except pickle.UnpicklingError as error:
         if not trusted:
             raise ValueError(
                 f"{path}: holds pickled Python objects besides tensors, so it does not load with "
-                f"weights_only=True ({str(error).splitlines()[0]}). If you trust the file, load it "
+                f"weights_only=True ({str(error).removeprefix(f'{path}: ')}). If you trust the file, load it "
                 "with trusted=True."
             ) from error
         log.warning("%s: loading with weights_only=False (trusted=True)", path)

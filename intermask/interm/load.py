@@ -2,19 +2,23 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import NamedTuple
 
-import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from intermask.interm.model import InterMTransformer
 from intermask.text.cache import TextFeatureCache
+from intermask.utils.checkpoint_files import read_checkpoint_file
 from intermask.utils.files import resolve_checkpoint, run_config_path
+from intermask.utils.fingerprint import weights_digest
 from intermask.utils.run_config import check_targets
 from intermask.vq.load import load_vq
 from intermask.vq.model import MotionVQVAE
+
+log = logging.getLogger(__name__)
 
 
 class LoadedGenerator(NamedTuple):
@@ -24,6 +28,36 @@ class LoadedGenerator(NamedTuple):
     checkpoint: Path  # the Inter-M checkpoint
     vq_checkpoint: Path
     config: DictConfig  # the run's resolved config
+
+
+def check_vq_matches(
+    net: InterMTransformer,
+    vq: MotionVQVAE,
+    hyper_parameters: dict,
+    checkpoint: Path,
+    vq_path: Path,
+) -> None:
+    """Refuse a VQ-VAE whose tokens are not the ones the generator was trained on: another
+    codebook size or row count, or (when the checkpoint records it) other weights."""
+    codes, rows = vq.quantizer.layers[0].codebook_size, vq.token_rows
+    if (codes, rows) != (net.codebook_size, net.rows):
+        raise ValueError(
+            f"{vq_path}: a VQ-VAE with {codes} codes x {rows} rows cannot decode the tokens of "
+            f"{checkpoint} ({net.codebook_size} codes x {net.rows} rows)"
+        )
+    expected = hyper_parameters.get("vq_digest")
+    if expected is None:
+        log.warning(
+            "%s records no VQ digest (older run): the VQ's weights are not checked", checkpoint
+        )
+        return
+    actual = weights_digest(vq)
+    if actual != expected:
+        raise ValueError(
+            f"{vq_path}: not the VQ-VAE {checkpoint} was trained on (weights digest "
+            f"{actual[:16]}, expected {expected[:16]}): its codes would decode into other "
+            "motions. Pass the tokenizer of the generator's run (its config.yaml names vq_ckpt)"
+        )
 
 
 def load_generator(
@@ -50,12 +84,14 @@ def load_generator(
             "vq_checkpoint= to point to it"
         )
     net = instantiate(net_config)
-    state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
-    net.load_state_dict({k.removeprefix("net."): v for k, v in state.items()})
+    stored = read_checkpoint_file(checkpoint, map_location=map_location)
+    net.load_state_dict({k.removeprefix("net."): v for k, v in stored["state_dict"].items()})
+    vq = load_vq(vq_path, map_location=map_location)
+    check_vq_matches(net, vq, stored.get("hyper_parameters", {}), checkpoint, vq_path)
     text = instantiate(text_config)
     return LoadedGenerator(
         net.eval().requires_grad_(False),
-        load_vq(vq_path, map_location=map_location),
+        vq,
         text,
         checkpoint,
         vq_path,

@@ -35,6 +35,7 @@ from intermask.interm.sampler import (
 from intermask.interm.token_cache import TokenCache, crop_keys
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
+from intermask.utils.fingerprint import weights_digest
 from intermask.utils.lightning import LossStepsModule
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.views import TwoPersonView
@@ -165,6 +166,8 @@ class InterMModule(LossStepsModule):
                 "sample_iterations": int(sample_iterations),
                 "fps": float(fps),
                 "token_cache": bool(token_cache),
+                # the tokens mean something only to this VQ: loaders check it (load_generator)
+                "vq_digest": weights_digest(vq),
             },
             logger=False,
         )
@@ -230,6 +233,16 @@ class InterMModule(LossStepsModule):
                     cache.put(keys[2 * sample + person], fresh[row, person])
         tokens = rearrange(torch.stack(codes), "(b p) r t -> b p r t", p=2)
         return tokens.to(motion.device)
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        """Resuming with another tokenizer would train on codes that mean other motions."""
+        stored = checkpoint.get("hyper_parameters", {}).get("vq_digest")
+        if stored is not None and stored != self.hparams.vq_digest:
+            raise ValueError(
+                f"the checkpoint was trained on the VQ-VAE with weights digest {stored[:16]}; "
+                f"this run's vq_ckpt has {self.hparams.vq_digest[:16]}: resume with the "
+                "tokenizer the checkpoint's run used"
+            )
 
     def on_train_epoch_start(self) -> None:
         if self.token_cache is not None:

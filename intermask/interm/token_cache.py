@@ -16,13 +16,14 @@ to be: the cache is keyed by a digest of the VQ's state and empties when it chan
 
 from __future__ import annotations
 
-import hashlib
 import logging
 from collections.abc import Sequence
 from typing import Any
 
 import torch
 from torch import nn
+
+from intermask.utils.fingerprint import weights_digest
 
 log = logging.getLogger(__name__)
 
@@ -34,16 +35,6 @@ CROP_FIELDS = ("id", "start", "persons")  # a batch without these is encoded, no
 CropKey = tuple[
     str, bool, int, int, int, int, int
 ]  # id, mirrored, start, reference, person, length, frames
-
-
-def vq_digest(vq: nn.Module) -> str:
-    """SHA-256 over the VQ's parameters and buffers (names, dtypes, shapes, values)."""
-    digest = hashlib.sha256()
-    for name, tensor in vq.state_dict().items():
-        value = tensor.detach().cpu().contiguous()
-        digest.update(f"{name}:{value.dtype}:{tuple(value.shape)}".encode())
-        digest.update(value.view(torch.uint8).numpy().tobytes() if value.numel() else b"")
-    return digest.hexdigest()
 
 
 def crop_keys(batch: dict[str, Any], lengths: Sequence[int], frames: int) -> list[CropKey] | None:
@@ -87,7 +78,7 @@ class TokenCache:
         when the module changes and where the caller asks (once per epoch)."""
         if id(vq) == self._vq_id and not recheck:
             return
-        digest = vq_digest(vq)
+        digest = weights_digest(vq)
         if digest != self.digest:
             if self.entries:
                 log.info("token cache: the VQ changed, %d cached crops dropped", len(self.entries))

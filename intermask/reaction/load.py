@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import torch
 from omegaconf import OmegaConf
 
 from intermask.reaction.module import ARFlowModule
+from intermask.utils.checkpoint_files import read_checkpoint_file
 from intermask.utils.files import resolve_checkpoint, run_config_path
 from intermask.utils.run_config import instantiate_from_run
 
@@ -27,6 +27,6 @@ def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowM
             f"{config_path}: not a train_arflow run config (model is not ARFlowModule)"
         )
     module: ARFlowModule = instantiate_from_run(model_config, source=config_path, section="model")
-    state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
+    state = read_checkpoint_file(checkpoint, map_location=map_location)["state_dict"]
     module.load_state_dict(state)
     return module.eval().requires_grad_(False)

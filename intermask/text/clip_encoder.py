@@ -13,7 +13,6 @@ layers) is registered with open_clip on import of this module.
 
 from __future__ import annotations
 
-import hashlib
 import logging
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,6 +21,8 @@ from typing import Any, NamedTuple
 import torch
 from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from torch import nn
+
+from intermask.utils.fingerprint import weights_digest
 
 log = logging.getLogger(__name__)
 
@@ -52,16 +53,6 @@ def padding_mask_from_eot(eot_index: torch.Tensor, length: int) -> torch.Tensor:
     """(B,) end-of-text positions -> (B, L) bool mask, True strictly after the end-of-text token."""
     positions = torch.arange(length, device=eot_index.device)
     return positions[None, :] > eot_index[:, None]
-
-
-def _fingerprint(module: nn.Module) -> str:
-    """Hash of every weight, so a cache keyed by it can never mix two different towers."""
-    digest = hashlib.sha256()
-    for name, tensor in sorted(module.state_dict().items()):
-        data = tensor.detach().to("cpu").contiguous()
-        digest.update(f"{name}:{data.dtype}:{tuple(data.shape)}".encode())
-        digest.update(data.reshape(-1).view(torch.uint8).numpy().tobytes())
-    return digest.hexdigest()[:16]
 
 
 class FrozenCLIPTextEncoder(nn.Module):
@@ -122,7 +113,7 @@ class FrozenCLIPTextEncoder(nn.Module):
         self.quick_gelu = quick_gelu
         self.identity = (
             f"open_clip:{model_name}|pretrained={self.source}|quick_gelu={quick_gelu}"
-            f"|context={context_length}|weights={_fingerprint(self)}"
+            f"|context={context_length}|weights={weights_digest(self)[:16]}"
         )
         if pretrained is None:
             _announce(

@@ -140,6 +140,7 @@ class MotionDecoder(nn.Module):
     ) -> None:
         super().__init__()
         self.layout, self.num_joints, self.out_channels = layout, num_joints, out_channels
+        self.latent_rows = latent_rows if layout == "2d" else 1  # token rows it decodes
         if layout == "2d":
             rows = latent_rows
             for scale in joint_scales:

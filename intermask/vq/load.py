@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import torch
 from omegaconf import OmegaConf
 
+from intermask.utils.checkpoint_files import read_checkpoint_file
 from intermask.utils.files import run_config_path
 from intermask.utils.run_config import instantiate_from_run
 from intermask.vq.model import MotionVQVAE
@@ -25,7 +25,7 @@ def load_vq(checkpoint: str | Path, *, map_location: str = "cpu") -> MotionVQVAE
     net = instantiate_from_run(
         OmegaConf.load(config_path).model.net, source=config_path, section="model.net"
     )
-    state = torch.load(checkpoint, map_location=map_location, weights_only=True)["state_dict"]
+    state = read_checkpoint_file(checkpoint, map_location=map_location)["state_dict"]
     net.load_state_dict(
         {k.removeprefix("net."): v for k, v in state.items() if k.startswith("net.")}
     )

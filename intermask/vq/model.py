@@ -48,6 +48,11 @@ class MotionVQVAE(nn.Module):
             )
         self.view, self.encoder, self.quantizer, self.decoder = view, encoder, quantizer, decoder
 
+    @property
+    def token_rows(self) -> int:
+        """Rows of the token grid: 5 body parts (2D tokens) or 1 (the 1D-token ablation)."""
+        return self.decoder.latent_rows
+
     @staticmethod
     def _check_frames(frames: int) -> None:
         if frames % 4:
