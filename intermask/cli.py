@@ -8,8 +8,9 @@ inside the sub-commands so that ``intermask --help`` answers at once.
 from __future__ import annotations
 
 import argparse
-import re
+import math
 import pickle
+import re
 import sys
 import time
 from collections.abc import Sequence
@@ -116,6 +117,41 @@ def _frame_range(text: str) -> tuple[int, int]:
     return int(match[1]), int(match[2])
 
 
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return value
+
+
+def _ratio(text: str) -> float:
+    value = float(text)
+    if not 0 < value <= 1:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"expected a ratio in (0, 1], got {text}")
+    return value
+
+
+def _output_folder(text: str) -> Path:
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} exists and is not a folder")
+    return path
+
+
 def _generate(args: argparse.Namespace) -> int:
     import torch
 
@@ -134,6 +170,8 @@ def _generate(args: argparse.Namespace) -> int:
         raise ValueError("--edit FILE needs --frames A:B (and --frames A:B needs --edit)")
     if args.reaction and args.edit:
         raise ValueError("--reaction and --edit are exclusive")
+    count = args.samples or defaults["samples"]
+    folders = gen.sample_folders(captions, count, Path(args.out or defaults["out"]))
     generator = load_generator(args.checkpoint, vq_checkpoint=args.vq_checkpoint)
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     generator.net.to(device)
@@ -174,7 +212,7 @@ def _generate(args: argparse.Namespace) -> int:
         generator,
         captions,
         frames=frames,
-        samples=args.samples or defaults["samples"],
+        samples=count,
         seed=defaults["seed"] if args.seed is None else args.seed,
         settings=settings,
         reaction=reaction,
@@ -183,8 +221,7 @@ def _generate(args: argparse.Namespace) -> int:
     )
     out = Path(args.out or defaults["out"])
     renders = [] if args.no_render else list(defaults["renders"])
-    for sample in samples:
-        directory = out / f"{gen.slug(sample.caption)}_{sample.index:02d}"
+    for sample, directory in zip(samples, folders, strict=True):
         paths = gen.write_sample(
             sample, directory, generator=generator, settings=settings, renders=renders
         )
@@ -208,16 +245,20 @@ def _add_generate_parser(commands) -> None:
     parser.add_argument("--text", action="append", help="a caption (repeat for several)")
     parser.add_argument("--prompts", help="file with one caption per line")
     length = parser.add_mutually_exclusive_group()
-    length.add_argument("--seconds", type=float, help="length in seconds (default 4)")
-    length.add_argument("--length-frames", type=int, help="length in frames")
-    parser.add_argument("--samples", type=int, help="samples per caption (default 1)")
+    length.add_argument("--seconds", type=_positive_float, help="length in seconds (default 4)")
+    length.add_argument("--length-frames", type=_positive_int, help="length in frames")
+    parser.add_argument("--samples", type=_positive_int, help="samples per caption (default 1)")
     parser.add_argument("--seed", type=int, help="first seed (default 0)")
-    parser.add_argument("--cfg-scale", type=float, help="classifier-free guidance scale (2)")
-    parser.add_argument("--iterations", type=int, help="decoding iterations (20; reaction 10)")
-    parser.add_argument("--top-k", type=float, help="top-k ratio of codes kept (0.1)")
-    parser.add_argument("--temperature", type=float, help="sampling temperature (1)")
-    parser.add_argument("--batch-size", type=int, help="samples per forward batch (32)")
-    parser.add_argument("--fps", type=float, help="frame rate of the dataset (30)")
+    parser.add_argument(
+        "--cfg-scale", type=_non_negative_float, help="classifier-free guidance scale (2)"
+    )
+    parser.add_argument(
+        "--iterations", type=_positive_int, help="decoding iterations (20; reaction 10)"
+    )
+    parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
+    parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")
+    parser.add_argument("--batch-size", type=_positive_int, help="samples per forward batch (32)")
+    parser.add_argument("--fps", type=_positive_float, help="frame rate of the dataset (30)")
     parser.add_argument("--reaction", help="reference person's motion: person 1 stays fixed")
     parser.add_argument("--edit", help="two-person motion to edit (needs --frames)")
     parser.add_argument(
@@ -225,7 +266,9 @@ def _add_generate_parser(commands) -> None:
     )
     parser.add_argument("--person", type=int, choices=(1, 2), help="edit one person only")
     parser.add_argument("--device", help="cpu, cuda, cuda:1 ... (default: cuda when available)")
-    parser.add_argument("--out", help="output folder (default outputs/generate)")
+    parser.add_argument(
+        "--out", type=_output_folder, help="output folder (default outputs/generate)"
+    )
     parser.add_argument("--no-render", action="store_true", help="write arrays and JSON only")
     parser.set_defaults(run=_generate)
 

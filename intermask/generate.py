@@ -227,6 +227,25 @@ def slug(text: str | None, limit: int = 40) -> str:
     return cleaned[:limit] or "sample"
 
 
+def sample_folders(captions: Sequence[str | None], samples: int, out: Path) -> list[Path]:
+    """The folder of sample k of caption c, in :func:`generate_samples`' order:
+    ``<caption slug>_<c>-<k>`` (the caption's number keeps captions that share their first 40
+    characters, or repeat, apart). An existing folder is refused before any work: a re-run would
+    mix new arrays with old renders, and samples are never overwritten."""
+    folders = [
+        out / f"{slug(caption)}_{c:02d}-{k:02d}"
+        for c, caption in enumerate(captions)
+        for k in range(samples)
+    ]
+    taken = [str(folder) for folder in folders if folder.exists()]
+    if taken:
+        raise FileExistsError(
+            f"{taken[0]}: a sample folder already exists ({len(taken)} of {len(folders)}); "
+            "choose another --out or remove them: samples are never overwritten"
+        )
+    return folders
+
+
 def write_sample(
     sample: Sample,
     directory: Path,

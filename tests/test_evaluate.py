@@ -162,7 +162,10 @@ def test_generate_command_writes_samples(runs, tmp_path, capsys):
     )
     assert code == 0, capsys.readouterr().err
     folders = sorted(tmp_path.iterdir())
-    assert [f.name for f in folders] == ["two_people_shake_hands_00", "two_people_shake_hands_01"]
+    assert [f.name for f in folders] == [
+        "two_people_shake_hands_00-00",
+        "two_people_shake_hands_00-01",
+    ]
     for folder in folders:
         assert np.load(folder / "joints.npy").shape == (28, 2, 22, 3)  # 1 s at 30 fps -> 28 frames
         assert np.load(folder / "features.npy").shape == (2, 28, 262)
@@ -177,6 +180,32 @@ def test_generate_command_writes_samples(runs, tmp_path, capsys):
     assert seeds == [0, 1]
     out = capsys.readouterr().out
     assert "2 sample(s)" in out and "28 frames" in out
+    # a re-run into the same folder is refused before any work; nothing written is lost
+    before = {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*")}
+    code = cli(
+        ["generate", "--checkpoint", str(runs["gen"]), "--text", "two people shake hands"]
+        + ["--samples", "2", "--out", str(tmp_path)]
+    )
+    assert code == 2
+    assert "two_people_shake_hands_00-00: a sample folder already exists (2 of 2)" in (
+        capsys.readouterr().err
+    )
+    assert {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*")} == before
+
+
+def test_captions_sharing_a_prefix_or_repeated_get_their_own_folders(runs, tmp_path, capsys):
+    prefix = "two people stand face to face and then one of them "  # > 40 characters
+    captions = [prefix + "waves", prefix + "bows", prefix + "waves"]
+    options = sum((["--text", c] for c in captions), [])
+    code = cli(
+        ["generate", "--checkpoint", str(runs["gen"]), *options, "--seconds", "1"]
+        + ["--iterations", "1", "--no-render", "--out", str(tmp_path)]
+    )
+    assert code == 0, capsys.readouterr().err
+    folders = sorted(p.name for p in tmp_path.iterdir())
+    assert folders == [f"two_people_stand_face_to_face_and_then_o_{c:02d}-00" for c in range(3)]
+    recorded = [json.loads((tmp_path / f / "sample.json").read_text())["caption"] for f in folders]
+    assert recorded == captions
 
 
 def _features_file(tmp_path: Path) -> Path:

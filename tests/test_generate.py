@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -83,3 +84,35 @@ def test_cli_reports_an_unknown_checkpoint(tmp_path, capsys):
     assert (
         "not a generator checkpoint and no checkpoints/last.ckpt inside" in capsys.readouterr().err
     )
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("--samples", "0", "expected an integer >= 1, got 0"),
+        ("--batch-size", "-1", "expected an integer >= 1, got -1"),
+        ("--iterations", "0", "expected an integer >= 1, got 0"),
+        ("--seconds", "nan", "expected a finite number > 0, got nan"),
+        ("--seconds", "-2", "expected a finite number > 0, got -2"),
+        ("--temperature", "inf", "expected a finite number > 0, got inf"),
+        ("--cfg-scale", "-1", "expected a finite number >= 0, got -1"),
+        ("--top-k", "5", r"expected a ratio in \(0, 1\], got 5"),
+        ("--top-k", "nan", r"expected a ratio in \(0, 1\], got nan"),
+    ],
+)
+def test_cli_numbers_are_checked_before_any_work(tmp_path, capsys, option, value, message):
+    argv = ["generate", "--checkpoint", str(tmp_path / "nope.ckpt"), "--text", "hi"]
+    with pytest.raises(SystemExit) as exit_info:
+        main([*argv, option, value])
+    assert exit_info.value.code == 2
+    assert re.search(rf"argument {option}: {message}", capsys.readouterr().err)
+
+
+def test_cli_refuses_a_file_as_output_folder(tmp_path, capsys):
+    target = tmp_path / "results.txt"
+    target.write_text("keep me")
+    argv = ["generate", "--checkpoint", str(tmp_path / "nope.ckpt"), "--text", "hi"]
+    with pytest.raises(SystemExit):
+        main([*argv, "--out", str(target)])
+    assert f"{target} exists and is not a folder" in capsys.readouterr().err
+    assert target.read_text() == "keep me"
