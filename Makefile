@@ -17,7 +17,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo overfit tb clean
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo overfit tb clean checkpoints
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -76,12 +76,17 @@ train-gen: install ## train Inter-M on frozen VQ tokens: make train-gen [VQ_CKPT
 train-arflow: install ## train ARFlow reactions: make train-arflow [DATA=...] [ARGS="experiment=arflow_demo"]
 	$(PY) -m intermask.train --config-name train_arflow $(DATA_ARG) $(ARGS)
 
-# the newest generator run and the newest evaluator's best checkpoint unless given
-GEN_CKPT ?= $(shell ls -td outputs/train_gen/runs/*/ 2>/dev/null | head -n 1)
+# the newest generator run with a checkpoint (a run that died before its first checkpoint is
+# never picked) and the newest evaluator's best checkpoint unless given
+GEN_CKPT ?= $(shell ls -t outputs/train_gen/runs/*/checkpoints/last.ckpt 2>/dev/null | head -n 1)
 EVAL_CKPT ?= $(shell ls -t outputs/train_evaluator/runs/*/checkpoints/best*.ckpt 2>/dev/null | head -n 1)
 MODE ?= interaction
 # reaction mode adds ARFlow's rows from the newest train_arflow run unless ARFLOW_CKPT is given (or empty)
-ARFLOW_CKPT ?= $(shell ls -td outputs/train_arflow/runs/*/ 2>/dev/null | head -n 1)
+ARFLOW_CKPT ?= $(shell ls -t outputs/train_arflow/runs/*/checkpoints/last.ckpt 2>/dev/null | head -n 1)
+
+checkpoints: ## print the checkpoints make train-gen / make eval would use (override any of them)
+	@echo "VQ_CKPT=$(VQ_CKPT)"; echo "GEN_CKPT=$(GEN_CKPT)"; echo "EVAL_CKPT=$(EVAL_CKPT)"; \
+		echo "ARFLOW_CKPT=$(ARFLOW_CKPT)"
 
 eval: install ## the 20-replication protocol: make eval [GEN_CKPT=run] [EVAL_CKPT=ckpt] [DATA=...] [MODE=interaction|reaction|reconstruction] [ARFLOW_CKPT=run] [ARGS="fast=true"]
 	@test -n "$(EVAL_CKPT)" || { echo "eval: no evaluator; run make train-evaluator or pass EVAL_CKPT=<ckpt>" >&2; exit 2; }
