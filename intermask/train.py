@@ -99,6 +99,10 @@ def train(cfg: DictConfig) -> dict[str, float]:
     output_dir = Path(cfg.paths.output_dir)
     precision = decide_precision(cfg)
     datamodule = instantiate(cfg.data)
+    # bad data fails here, in seconds, before the model (text tower, VQ checkpoint) is built; the
+    # datamodule keeps what it read, so fit does not read it again
+    datamodule.prepare_data()
+    datamodule.setup("fit")
     model = instantiate(cfg.model)
     resolve_monitor(cfg, model)
     write_run_record(

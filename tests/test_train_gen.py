@@ -139,3 +139,25 @@ def test_a_generator_refuses_a_tokenizer_it_was_not_trained_on(
         ValueError, match="the checkpoint was trained on the VQ-VAE with weights digest"
     ):
         train(resume)
+
+
+def test_bad_data_is_reported_before_the_model_is_built(synthetic_interhuman_root, tmp_path):
+    import shutil
+
+    import numpy as np
+
+    from intermask.data.errors import DataError
+
+    root = tmp_path / "data"
+    shutil.copytree(synthetic_interhuman_root, root)
+    clip = (root / "split" / "train.txt").read_text().split()[0]
+    broken = root / "motions_processed" / "person1" / f"{clip}.npy"
+    motion = np.load(broken)
+    motion[3, 5] = np.nan
+    np.save(broken, motion)
+    # the VQ checkpoint does not exist either: the model build would fail on it, so the data
+    # error can only come first if the data is read before the model is built
+    cfg = _gen_config(root, tmp_path / "missing_vq.ckpt", tmp_path / "run")
+    with pytest.raises(DataError, match=rf"{clip}.npy"):
+        train(cfg)
+    assert not (tmp_path / "run" / "checkpoints").exists()
