@@ -15,6 +15,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from intermask.utils.checkpoint_io import AtomicCheckpointIO
+from intermask.utils.lightning import NON_FINITE_POLICIES
 from intermask.utils.precision import PrecisionChoice, resolve_precision
 from intermask.utils.run_record import write_run_record
 
@@ -73,6 +74,14 @@ def resume_checkpoint(ckpt_path: str | None, *, allow_remote: bool = False) -> s
     return ckpt_path
 
 
+def non_finite_policy(cfg: DictConfig) -> str:
+    """``non_finite_loss`` of the job config: ``stop`` (default) or ``skip``."""
+    policy = str(cfg.get("non_finite_loss", "stop"))
+    if policy not in NON_FINITE_POLICIES:
+        raise ValueError(f"non_finite_loss must be one of {NON_FINITE_POLICIES}, got {policy!r}")
+    return policy
+
+
 def resolve_monitor(cfg: DictConfig, model: L.LightningModule) -> None:
     """``monitor: auto`` of the best-checkpoint callback -> the module's ``checkpoint_metric``
     (in place, logged), so the selection metric is one the module logs for this dataset."""
@@ -104,6 +113,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     datamodule.prepare_data()
     datamodule.setup("fit")
     model = instantiate(cfg.model)
+    model.non_finite_loss = non_finite_policy(cfg)
     resolve_monitor(cfg, model)
     write_run_record(
         output_dir, cfg, extra={"job": cfg.task_name, "precision": precision.as_record()}

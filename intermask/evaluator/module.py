@@ -130,9 +130,11 @@ class EvaluatorModule(ScheduledModule):
         shift = int(torch.randint(1, len(text), ()))
         return margin_loss(text, motion, margin=self.hparams.margin, shift=shift)
 
-    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor | None:
         text, motion = self.embed(batch)
         loss = self.compute_loss(text, motion)
+        if self.skip_non_finite({"loss": loss}, batch):
+            return None
         batch_size = len(text)
         self.log("train/loss", loss, batch_size=batch_size, prog_bar=True)
         if isinstance(self.net, InterCLIP):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Mapping
 from typing import Any, NamedTuple
 
@@ -10,6 +11,8 @@ import torch
 from torch import nn
 
 from intermask.utils.schedules import warmup_multistep_optimizers
+
+log = logging.getLogger(__name__)
 
 
 def writes_step_logs(module: L.LightningModule) -> bool:
@@ -23,10 +26,53 @@ def writes_step_logs(module: L.LightningModule) -> bool:
     return every > 0 and ((module.global_step + 1) % every == 0 or trainer.should_stop)
 
 
+NON_FINITE_POLICIES = ("stop", "skip")
+
+
+class NonFiniteLoss(RuntimeError):
+    """A training loss term is NaN or infinite (policy ``stop``)."""
+
+
 class ScheduledModule(L.LightningModule):
     """Optimizer ``self.optimizer_factory`` over :meth:`optimized_parameters`, with the warm-up
     multistep schedule of the hyper-parameters ``warmup_fraction``, ``lr_milestones`` and
-    ``lr_gamma`` (fractions of the run's optimizer steps), stepped every step."""
+    ``lr_gamma`` (fractions of the run's optimizer steps), stepped every step.
+
+    Training steps pass their loss terms through :meth:`skip_non_finite`: a NaN or infinite term
+    stops the run (``non_finite_loss = "stop"``, the default; the checkpoints written so far are
+    the last good ones) or skips that optimizer step (``"skip"``), naming the step, the terms
+    and the batch's clip ids. ``train.py`` sets the policy from the job config.
+    """
+
+    non_finite_loss: str = "stop"
+    skipped_steps: int = 0
+
+    def skip_non_finite(self, terms: Mapping[str, torch.Tensor], batch: Mapping[str, Any]) -> bool:
+        """True when this step must be skipped (policy ``skip``); raises :class:`NonFiniteLoss`
+        under ``stop``. All processes of a DDP run take the same decision."""
+        finite = torch.stack([torch.isfinite(value).all() for value in terms.values()]).tolist()
+        bad = [name for name, ok in zip(terms, finite, strict=True) if not ok]  # one device sync
+        trainer = self._trainer
+        if trainer is not None and trainer.world_size > 1:
+            if not trainer.strategy.reduce_boolean_decision(bool(bad), all=False):
+                return False
+        elif not bad:
+            return False
+        ids = [str(i) for i in batch.get("id", [])]
+        shown = ", ".join(ids[:8]) + (f" and {len(ids) - 8} more" if len(ids) > 8 else "")
+        where = (
+            f"step {self.global_step}: non-finite training loss "
+            f"({', '.join(bad) if bad else 'on another process'}) on the batch of clips "
+            f"[{shown}]"
+        )
+        if self.non_finite_loss == "skip":
+            self.skipped_steps += 1
+            log.warning("%s: step skipped (%d so far)", where, self.skipped_steps)
+            return True
+        raise NonFiniteLoss(
+            f"{where}; the run stops (non_finite_loss=stop) and its checkpoints hold the last "
+            "good weights. Set non_finite_loss=skip to skip such steps instead"
+        )
 
     def optimized_parameters(self) -> Iterable[nn.Parameter]:
         """What the optimizer updates (default: every parameter)."""
@@ -66,8 +112,10 @@ class LossStepsModule(ScheduledModule):
                 sync_dist=prefix == "val",
             )
 
-    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor | None:
         losses = self.compute_losses(batch, condition_drop=self.hparams.condition_drop)
+        if self.skip_non_finite(self.loss_values(losses), batch):
+            return None
         self._log_losses("train", losses, batch["motion"].shape[0])
         return losses.total
 

@@ -132,10 +132,12 @@ class VQVAEModule(ScheduledModule):
         )
         return terms, frame_mask, out, (predicted, real)
 
-    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor | None:
         logged = writes_step_logs(self)
         # unweighted loss terms only matter on steps whose logs are written
         terms, _, out, _ = self._step(batch, measure_unweighted=logged)
+        if self.skip_non_finite(terms._asdict(), batch):
+            return None
         batch_size = batch["motion"].shape[0]
         self.log("train/loss", terms.total, batch_size=batch_size, prog_bar=True)
         if not logged:

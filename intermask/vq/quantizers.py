@@ -167,8 +167,16 @@ class EMAQuantizer(nn.Module):
 
     @torch.no_grad()
     def _ema_update(self, flat: torch.Tensor, indices: torch.Tensor) -> torch.Tensor:
-        """EMA step of counts, sums and codes; returns how many dead codes were reset."""
-        counts = _all_reduce_sum(torch.bincount(indices, minlength=self.codebook_size).float())
+        """EMA step of counts, sums and codes; returns how many dead codes were reset.
+
+        Rows with a NaN or infinity (a corrupt batch) count for nothing: a training step that
+        is then skipped (``non_finite_loss=skip``) leaves the codebook as it was, without a sync.
+        """
+        valid = torch.isfinite(flat).all(dim=-1)
+        flat = torch.where(valid[:, None], flat, torch.zeros_like(flat))
+        counts = _all_reduce_sum(
+            torch.bincount(indices, weights=valid.float(), minlength=self.codebook_size).float()
+        )
         sums = _all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
         self.ema_count.mul_(self.decay).add_(counts, alpha=1 - self.decay)
         self.ema_sum.mul_(self.decay).add_(sums, alpha=1 - self.decay)
