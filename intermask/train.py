@@ -99,6 +99,23 @@ def resolve_monitor(cfg: DictConfig, model: L.LightningModule) -> None:
     log.info("best checkpoint by %s", metric)
 
 
+def log_effective_batch(cfg: DictConfig, trainer: L.Trainer) -> int:
+    """Log (and return) the samples behind one optimizer step: the per-process batch x the
+    processes x the gradient accumulation (the paper's batch on fewer devices: raise
+    ``trainer.accumulate_grad_batches``)."""
+    per_process = int(cfg.data.batch_size)
+    accumulation = int(trainer.accumulate_grad_batches)
+    effective = per_process * trainer.world_size * accumulation
+    log.info(
+        "effective batch %d = %d per process x %d process(es) x %d accumulated",
+        effective,
+        per_process,
+        trainer.world_size,
+        accumulation,
+    )
+    return effective
+
+
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit the configured model on the configured data; returns the final callback metrics."""
     L.seed_everything(cfg.seed, workers=True)
@@ -128,6 +145,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
         logger=instantiate_all(cfg.get("logger")) or False,
         plugins=[AtomicCheckpointIO()],  # a kill mid-write never leaves a broken last.ckpt
     )
+    log_effective_batch(cfg, trainer)
     # weights_only=True explicitly: torch.load then ignores TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD, and
     # Lightning's remote default (weights_only=False) never applies
     trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)

@@ -46,6 +46,7 @@ def test_train_vq_writes_record_checkpoints_and_tensorboard(
     with caplog.at_level("INFO", logger="intermask.train"):
         metrics = train(_config(synthetic_interhuman_root, tmp_path))
     assert re.search(r"VQVAEModule: \d+\.\d\dM parameters", caplog.text)
+    assert "effective batch 16 = 16 per process x 1 process(es) x 1 accumulated" in caplog.text
     assert metrics["val/mpjpe_mm"] > 0 and torch.isfinite(torch.tensor(metrics["train/loss"]))
     assert (tmp_path / "config.yaml").is_file() and (tmp_path / "run_record.json").is_file()
     precision = json.loads((tmp_path / "run_record.json").read_text())["precision"]
