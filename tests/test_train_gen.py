@@ -161,3 +161,58 @@ def test_bad_data_is_reported_before_the_model_is_built(synthetic_interhuman_roo
     with pytest.raises(DataError, match=rf"{clip}.npy"):
         train(cfg)
     assert not (tmp_path / "run" / "checkpoints").exists()
+
+
+def test_the_interx_chain_trains_tokenizer_then_generator(synthetic_interx_root, tmp_path):
+    """Inter-X end to end: its tokenizer (selected by reconstruction, no body model) and Inter-M
+    on its tokens, each writing checkpoints."""
+    common = [
+        "data=synthetic_interx",
+        f"data.root={synthetic_interx_root}",
+        "data.num_workers=0",
+        "trainer=cpu",
+        "trainer.max_epochs=1",
+        "trainer.limit_train_batches=2",
+        "trainer.limit_val_batches=1",
+        "callbacks.rich_progress_bar=null",
+    ]
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        vq_cfg = compose(
+            "train_vq",
+            overrides=[
+                *common,
+                "data.batch_size=16",
+                "model.net.encoder.width=16",
+                "model.net.quantizer.codebook_size=32",
+            ],
+        )
+    with open_dict(vq_cfg):
+        vq_cfg.paths.output_dir = str(tmp_path / "vq")
+    train(vq_cfg)
+    vq_ckpt = tmp_path / "vq" / "checkpoints" / "last.ckpt"
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        gen_cfg = compose(
+            "train_gen",
+            overrides=[
+                *common,
+                "data.batch_size=4",
+                "text=tiny_random",
+                f"text.cache_dir={tmp_path / 'text_cache'}",
+                f"vq_ckpt={vq_ckpt}",
+                "model.net.codebook_size=32",
+                "model.net.width=32",
+                "model.net.heads=2",
+                "model.net.depth=1",
+                "model.net.ff=64",
+                "model.net.token_embed_dim=32",
+                "model.net.text_dim=64",
+                "model.net.text_layers=1",
+                "model.net.text_heads=2",
+                "model.net.text_ff=64",
+            ],
+        )
+    with open_dict(gen_cfg):
+        gen_cfg.paths.output_dir = str(tmp_path / "gen")
+    metrics = train(gen_cfg)
+    assert torch.isfinite(torch.tensor(metrics["val/loss"]))
+    assert _last(tmp_path / "gen")["global_step"] == 2
