@@ -64,6 +64,9 @@ def test_train_gen_learns_on_frozen_tokens(synthetic_interhuman_root, vq_checkpo
     for source in ("generated", "real"):
         assert 0.0 < metrics[f"val_samples/{source}_root_distance"] < 10.0
         assert metrics[f"val_samples/{source}_joint_speed"] > 0.0
+    # two steps in, the captions tell the network almost nothing yet: CE near ln(32 codes)
+    assert 2.5 < metrics["val/fully_masked_ce"] < 4.5
+    assert abs(metrics["val/condition_gain"]) < 0.5
     # the GT skeleton is rigid; the decoded one of a barely trained VQ-VAE is not
     assert metrics["val_samples/real_bone_length_std"] < 1.0
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator

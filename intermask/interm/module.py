@@ -305,9 +305,30 @@ class InterMModule(LossStepsModule):
             "masked_accuracy": losses.masked_accuracy,
         }
 
+    def condition_gain(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Masked CE of the batch with every token masked, with its captions and with the null
+        condition -> (ce_text, ce_null). Their difference (nats per token) is how much the
+        caption tells the network at the first decoding iteration, where the sampler has
+        nothing else to go on; near 0 means samples will not follow their captions."""
+        targets, lengths_in_steps = self.tokenize(batch)
+        mask = targets >= 0
+        masked = targets.masked_fill(mask, self.net.vocabulary.mask_id)
+        text = self.encode_text(batch["caption"])
+        ce = []
+        for drop in (False, True):
+            flags = torch.full((targets.shape[0],), drop, device=targets.device)
+            logits = self._forward(masked, text, lengths_in_steps, flags)
+            ce.append(masked_cross_entropy(logits, targets, mask))
+        return ce[0], ce[1]
+
     def _log_validation_samples(self, batch: dict[str, Any]) -> None:
-        """Generate from the first captions of the batch and log decoded joint statistics of
-        the samples and of their ground truth (same lengths)."""
+        """Log the condition gain of the batch (:meth:`condition_gain`), then generate from the
+        first captions of the batch and log decoded joint statistics of the samples and of
+        their ground truth (same lengths)."""
+        ce_text, ce_null = self.condition_gain(batch)
+        size = batch["motion"].shape[0]
+        self.log("val/fully_masked_ce", ce_text, batch_size=size)
+        self.log("val/condition_gain", ce_null - ce_text, batch_size=size)
         count = min(self.hparams.validation_samples, batch["motion"].shape[0])
         captions = list(batch["caption"][:count])
         motion = batch["motion"][:count]
