@@ -7,18 +7,11 @@ import pickle
 
 import pytest
 import torch
+from payloads import ExecPayload
 from test_train_vq import _config
 
 from intermask.train import resume_checkpoint, train
 from intermask.utils.checkpoint_files import CorruptCheckpoint
-
-
-class _Payload:
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (exec, (f"open({self.marker!r}, 'w').write('ran')",))
 
 
 def test_a_url_is_refused_before_any_work(synthetic_interhuman_root, tmp_path):
@@ -40,7 +33,7 @@ def test_a_pickled_payload_is_refused_even_when_the_environment_asks_for_full_un
 ):
     marker = tmp_path / "marker"
     evil = tmp_path / "evil.ckpt"
-    torch.save({"state_dict": {}, "epoch": _Payload(marker)}, evil)
+    torch.save({"state_dict": {}, "epoch": ExecPayload(marker)}, evil)
     monkeypatch.setenv("TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD", "1")
     cfg = _config(synthetic_interhuman_root, tmp_path / "run", [f"ckpt_path={evil}"])
     with pytest.raises(pickle.UnpicklingError, match="Weights only load failed"):

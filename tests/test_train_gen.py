@@ -22,12 +22,12 @@ def vq_checkpoint(synthetic_interhuman_root, tmp_path_factory) -> Path:
     return run / "checkpoints" / "last.ckpt"
 
 
-def _gen_config(data_root: Path, vq_ckpt: Path, output_dir: Path):
+def _gen_config(data_root: Path, vq_ckpt: Path, output_dir: Path, data: str = "synthetic"):
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(
             "train_gen",
             overrides=[
-                "data=synthetic",
+                f"data={data}",
                 f"data.root={data_root}",
                 "data.batch_size=4",
                 "data.num_workers=0",
@@ -169,53 +169,9 @@ def test_bad_data_is_reported_before_the_model_is_built(synthetic_interhuman_roo
 def test_the_interx_chain_trains_tokenizer_then_generator(synthetic_interx_root, tmp_path):
     """Inter-X end to end: its tokenizer (selected by reconstruction, no body model) and Inter-M
     on its tokens, each writing checkpoints."""
-    common = [
-        "data=synthetic_interx",
-        f"data.root={synthetic_interx_root}",
-        "data.num_workers=0",
-        "trainer=cpu",
-        "trainer.max_epochs=1",
-        "trainer.limit_train_batches=2",
-        "trainer.limit_val_batches=1",
-        "callbacks.rich_progress_bar=null",
-    ]
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        vq_cfg = compose(
-            "train_vq",
-            overrides=[
-                *common,
-                "data.batch_size=16",
-                "model.net.encoder.width=16",
-                "model.net.quantizer.codebook_size=32",
-            ],
-        )
-    with open_dict(vq_cfg):
-        vq_cfg.paths.output_dir = str(tmp_path / "vq")
-    train(vq_cfg)
+    train(vq_config(synthetic_interx_root, tmp_path / "vq", data="synthetic_interx"))
     vq_ckpt = tmp_path / "vq" / "checkpoints" / "last.ckpt"
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        gen_cfg = compose(
-            "train_gen",
-            overrides=[
-                *common,
-                "data.batch_size=4",
-                "text=tiny_random",
-                f"text.cache_dir={tmp_path / 'text_cache'}",
-                f"vq_ckpt={vq_ckpt}",
-                "model.net.codebook_size=32",
-                "model.net.width=32",
-                "model.net.heads=2",
-                "model.net.depth=1",
-                "model.net.ff=64",
-                "model.net.token_embed_dim=32",
-                "model.net.text_dim=64",
-                "model.net.text_layers=1",
-                "model.net.text_heads=2",
-                "model.net.text_ff=64",
-            ],
-        )
-    with open_dict(gen_cfg):
-        gen_cfg.paths.output_dir = str(tmp_path / "gen")
+    gen_cfg = _gen_config(synthetic_interx_root, vq_ckpt, tmp_path / "gen", data="synthetic_interx")
     metrics = train(gen_cfg)
     assert torch.isfinite(torch.tensor(metrics["val/loss"]))
     assert _last(tmp_path / "gen")["global_step"] == 2

@@ -15,12 +15,12 @@ from omegaconf import open_dict
 from intermask.train import CONFIG_DIR, train
 
 
-def _config(data_root: Path, output_dir: Path, overrides: list[str] = ()):
+def _config(data_root: Path, output_dir: Path, overrides: list[str] = (), data: str = "synthetic"):
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose(
             "train_vq",
             overrides=[
-                "data=synthetic",
+                f"data={data}",
                 f"data.root={data_root}",
                 "data.batch_size=16",
                 "data.num_workers=0",
@@ -119,25 +119,12 @@ def test_train_vq_on_interx_selects_by_reconstruction_and_writes_checkpoints(
 ):
     # the Inter-X view has no positions without a body model, so no val/mpjpe_mm: `monitor: auto`
     # selects by val/reconstruction (a fixed val/mpjpe_mm ended every Inter-X run at epoch 0)
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose(
-            "train_vq",
-            overrides=[
-                "data=synthetic_interx",
-                f"data.root={synthetic_interx_root}",
-                "data.batch_size=16",
-                "data.num_workers=0",
-                "model.net.encoder.width=16",
-                "model.net.quantizer.codebook_size=32",
-                "trainer=cpu",
-                "trainer.max_epochs=2",
-                "trainer.limit_train_batches=2",
-                "trainer.limit_val_batches=1",
-                "callbacks.rich_progress_bar=null",
-            ],
-        )
-    with open_dict(cfg):
-        cfg.paths.output_dir = str(tmp_path)
+    epochs = [
+        "trainer.max_epochs=2",
+        "trainer.limit_train_batches=2",
+        "trainer.limit_val_batches=1",
+    ]
+    cfg = _config(synthetic_interx_root, tmp_path, epochs, data="synthetic_interx")
     with caplog.at_level("INFO", logger="intermask.train"):
         metrics = train(cfg)
     assert "best checkpoint by val/reconstruction" in caplog.text

@@ -5,6 +5,7 @@ import pickle
 import h5py
 import numpy as np
 import pytest
+from payloads import ExecPayload
 import torch
 from builders import CAPTIONS, write_interx
 
@@ -281,20 +282,10 @@ def test_invalid_arguments(small):
         InterXDataset(root=small, split="train", normalizer=Normalizer.identity((262,)))
 
 
-class _Payload:
-    """A pickle that writes a marker file when unpickled with ``pickle.load``."""
-
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (exec, (f"open({self.marker!r}, 'w').write('ran')",))
-
-
 def test_a_payload_in_the_order_file_is_refused_without_running(small, tmp_path_factory):
     marker = tmp_path_factory.mktemp("payload") / "marker"
     order_file = small / "annots" / "interaction_order.pkl"
-    order_file.write_bytes(pickle.dumps({"G001T000A000R000": _Payload(marker)}))
+    order_file.write_bytes(pickle.dumps({"G001T000A000R000": ExecPayload(marker)}))
     with pytest.raises(DataError) as refused:
         InterXDataset(root=small, split="train")
     assert str(order_file) in str(refused.value)

@@ -6,16 +6,9 @@ import pickle
 
 import numpy as np
 import pytest
+from payloads import ExecPayload
 
 from intermask.utils.plain_pickle import UnsafePickle, load_plain_pickle
-
-
-class _Payload:
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (exec, (f"open({self.marker!r}, 'w').write('ran')",))
 
 
 def test_plain_containers_and_numpy_scalars_load(tmp_path):
@@ -30,7 +23,7 @@ def test_plain_containers_and_numpy_scalars_load(tmp_path):
 def test_a_payload_is_refused_naming_the_file_and_never_runs(tmp_path, protocol):
     marker = tmp_path / "marker"
     path = tmp_path / "evil.pkl"
-    path.write_bytes(pickle.dumps({"k": _Payload(marker)}, protocol=protocol))
+    path.write_bytes(pickle.dumps({"k": ExecPayload(marker)}, protocol=protocol))
     with pytest.raises(
         UnsafePickle, match=rf"{path}: refusing to load (__builtin__|builtins).exec"
     ):

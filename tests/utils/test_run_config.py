@@ -10,6 +10,7 @@ import torch
 import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from payloads import exec_target
 
 from intermask.evaluator.load import load_evaluator
 from intermask.interm.load import load_generator
@@ -44,10 +45,6 @@ def test_every_section_a_loader_builds_passes_the_check(config_name, overrides, 
         assert checked["_target_"] in LOADABLE_TARGETS
 
 
-def _payload(marker: Path) -> dict:
-    return {"_target_": "builtins.exec", "_args_": [f"open({str(marker)!r}, 'w').write('ran')"]}
-
-
 def _run_folder(tmp_path: Path, config: dict) -> Path:
     run = tmp_path / "run"
     (run / "checkpoints").mkdir(parents=True)
@@ -71,7 +68,7 @@ def _run_folder(tmp_path: Path, config: dict) -> Path:
 )
 def test_a_payload_in_a_run_config_is_refused_before_it_runs(tmp_path, loader, config):
     marker = tmp_path / "marker"
-    run = _run_folder(tmp_path, config(_payload(marker)))
+    run = _run_folder(tmp_path, config(exec_target(marker)))
     with pytest.raises(UnsafeRunConfig) as refused:
         loader(run / "checkpoints" / "last.ckpt")
     message = str(refused.value)
@@ -86,7 +83,7 @@ def test_the_text_tower_section_is_checked_before_anything_is_read(tmp_path):
         _compose("train_gen", "vq_ckpt=unused", "text=tiny_random").model.net, resolve=True
     )
     run = _run_folder(
-        tmp_path, {"vq_ckpt": "x.ckpt", "model": {"net": net}, "text": _payload(marker)}
+        tmp_path, {"vq_ckpt": "x.ckpt", "model": {"net": net}, "text": exec_target(marker)}
     )
     with pytest.raises(
         UnsafeRunConfig, match=r"refusing to build 'builtins.exec' \(at text._target_\)"
