@@ -1,0 +1,111 @@
+"""The cluster path without a cluster: a 2-job sweep through submitit's local executor, and the
+SLURM launcher config's sbatch parameters."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from intermask.train import CONFIG_DIR
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_two_job_sweep_runs_through_the_local_executor(synthetic_interhuman_root, tmp_path):
+    sweep = tmp_path / "sweep"
+    command = [
+        sys.executable,
+        "-m",
+        "intermask.train",
+        "--config-name",
+        "train_vq",
+        "--multirun",
+        "hydra/launcher=submitit_local",
+        "hydra.launcher.timeout_min=10",
+        f"hydra.sweep.dir={sweep}",
+        f"data.root={synthetic_interhuman_root}",
+        "data.batch_size=16",
+        "data.num_workers=0",
+        "model.net.encoder.width=16",
+        "model.net.quantizer.codebook_size=16,32",  # the swept value: two jobs
+        "trainer=cpu",
+        "trainer.max_epochs=1",
+        "trainer.limit_train_batches=2",
+        "trainer.limit_val_batches=1",
+        "callbacks.rich_progress_bar=null",
+        "callbacks.sample_animations=null",
+    ]
+    environment = {**os.environ, "OMP_NUM_THREADS": "1"}
+    done = subprocess.run(command, cwd=ROOT, env=environment, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    # the jobs went through submitit (its job folders), not Hydra's in-process launcher
+    assert len(list((sweep / ".submitit").glob("*/*_result.pkl"))) == 2
+    for job, codes in ((0, 16), (1, 32)):
+        run = sweep / str(job)
+        assert (run / "checkpoints" / "last.ckpt").is_file()
+        record = json.loads((run / "run_record.json").read_text())
+        assert record["job"] == "train_vq"
+        assert f"codebook_size: {codes}" in (run / "config.yaml").read_text()
+
+
+def test_the_slurm_launcher_renders_the_expected_sbatch_parameters():
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(
+            "train_vq",
+            overrides=[
+                "hydra/launcher=slurm",
+                "hydra.launcher.partition=gpu",
+                "hydra.launcher.gpus_per_node=4",
+                "hydra.launcher.account=lab",
+            ],
+            return_hydra_config=True,
+        )
+    launcher = cfg.hydra.launcher
+    assert (
+        launcher._target_ == "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
+    )
+    from submitit.slurm.slurm import _make_sbatch_string
+
+    script = _make_sbatch_string(
+        command="python -m intermask.train",
+        folder="logs/%j",
+        job_name="train_vq",
+        partition=launcher.partition,
+        time=launcher.timeout_min,
+        nodes=launcher.nodes,
+        ntasks_per_node=launcher.tasks_per_node,
+        cpus_per_task=launcher.cpus_per_task,
+        gpus_per_node=launcher.gpus_per_node,
+        mem=f"{launcher.mem_gb}GB",
+        account=launcher.account,
+        signal_delay_s=launcher.signal_delay_s,
+    )
+    for line in (
+        "#SBATCH --partition=gpu",
+        "#SBATCH --time=2880",
+        "#SBATCH --nodes=1",
+        "#SBATCH --ntasks-per-node=4",  # one task per GPU: Lightning's SLURM environment
+        "#SBATCH --gpus-per-node=4",
+        "#SBATCH --cpus-per-task=8",
+        "#SBATCH --mem=64GB",
+        "#SBATCH --account=lab",
+        "#SBATCH --signal=USR2@",  # submitit's pre-emption signal, ahead of the time limit
+    ):
+        assert line in script, (line, script)
+
+
+@pytest.mark.parametrize("preset", ["slurm"])
+def test_launcher_presets_compose(preset):
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(
+            "train_gen",
+            overrides=[f"hydra/launcher={preset}", "vq_ckpt=x"],
+            return_hydra_config=True,
+        )
+    assert cfg.hydra.launcher.tasks_per_node == cfg.hydra.launcher.gpus_per_node
