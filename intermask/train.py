@@ -122,6 +122,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     ckpt_path = resume_checkpoint(
         cfg.get("ckpt_path"), allow_remote=bool(cfg.get("allow_remote_ckpt", False))
     )
+    non_finite = non_finite_policy(cfg)  # settings are checked before any data is read
     output_dir = Path(cfg.paths.output_dir)
     precision = decide_precision(cfg)
     datamodule = instantiate(cfg.data)
@@ -130,7 +131,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     datamodule.prepare_data()
     datamodule.setup("fit")
     model = instantiate(cfg.model)
-    model.non_finite_loss = non_finite_policy(cfg)
+    model.non_finite_loss = non_finite
     resolve_monitor(cfg, model)
     write_run_record(
         output_dir, cfg, extra={"job": cfg.task_name, "precision": precision.as_record()}
