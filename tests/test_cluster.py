@@ -9,7 +9,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 from hydra import compose, initialize_config_dir
 
 from intermask.train import CONFIG_DIR
@@ -100,12 +99,11 @@ def test_the_slurm_launcher_renders_the_expected_sbatch_parameters():
         assert line in script, (line, script)
 
 
-@pytest.mark.parametrize("preset", ["slurm"])
-def test_launcher_presets_compose(preset):
+def test_the_slurm_preset_composes_with_the_generator_job():
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(
             "train_gen",
-            overrides=[f"hydra/launcher={preset}", "vq_ckpt=x"],
+            overrides=["hydra/launcher=slurm", "vq_ckpt=x"],
             return_hydra_config=True,
         )
     assert cfg.hydra.launcher.tasks_per_node == cfg.hydra.launcher.gpus_per_node

@@ -69,9 +69,7 @@ class VQVAEModule(ScheduledModule):
         """What ``monitor: auto`` selects checkpoints by: MPJPE when the representation has
         positions (InterHuman; Inter-X with body offsets), else the reconstruction loss (the
         only validation quality the Inter-X view logs without a body model)."""
-        view = person_view(self.net.view)
-        has_positions = getattr(view, "has_positions", True)
-        return "val/mpjpe_mm" if has_positions else "val/reconstruction"
+        return "val/mpjpe_mm" if person_view(self.net.view).has_positions else "val/reconstruction"
 
     def setup(self, stage: str) -> None:
         """Copy the datamodule's normalization statistics into the view (then they live in checkpoints)."""

@@ -78,6 +78,11 @@ class InterHumanView(nn.Module):
     def denormalize(self, features: torch.Tensor) -> torch.Tensor:
         return features * self.std + self.mean
 
+    @property
+    def has_positions(self) -> bool:
+        """InterHuman features carry joint positions (InterXView needs a body model for them)."""
+        return True
+
     def geometry(self, features: torch.Tensor) -> Geometry:
         """(B, T, 262) normalized -> de-normalized Geometry."""
         parts = ih.split_features(self.denormalize(features))
