@@ -132,6 +132,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     datamodule.setup("fit")
     model = instantiate(cfg.model)
     model.non_finite_loss = non_finite
+    model.draw_seed = int(cfg.seed)  # masks and code resets: the same with any number of processes
     resolve_monitor(cfg, model)
     write_run_record(
         output_dir, cfg, extra={"job": cfg.task_name, "precision": precision.as_record()}

@@ -163,31 +163,76 @@ def item_rng(seed: int, epoch: int, index: int) -> np.random.Generator:
 class EpochSampler(Sampler[tuple[int, int]]):
     """Yields ``(index, epoch)``; shuffles with a generator seeded by ``(seed, epoch)``.
 
-    Lightning calls ``set_epoch`` at every epoch (also through its DDP sampler wrapper), so
-    training re-draws crops/captions per epoch, while a fixed epoch replays an evaluation pass
-    exactly.
+    Lightning calls ``set_epoch`` at every epoch, so training re-draws crops/captions per epoch,
+    while a fixed epoch replays an evaluation pass exactly.
+
+    Data parallel (``world_size`` > 1, ``batch_size`` per process): the order is the same on
+    every rank and in one process; it is cut into global batches of ``batch_size * world_size``
+    and rank r takes the r-th contiguous block of each, so an optimizer step on N processes sees
+    exactly the samples (and, ranks concatenated, the order) of a step of one process with the
+    global batch. A last, partial global batch is dropped with ``drop_last``; otherwise it is
+    padded by repeating the order's first items (as ``DistributedSampler`` does; the metrics
+    drop these duplicates by id) so that every rank runs the same number of steps.
     """
 
-    def __init__(self, size: int, *, shuffle: bool, seed: int, epoch: int = 0):
+    def __init__(
+        self,
+        size: int,
+        *,
+        shuffle: bool,
+        seed: int,
+        epoch: int = 0,
+        batch_size: int = 1,
+        rank: int = 0,
+        world_size: int = 1,
+        drop_last: bool = False,
+    ):
+        if world_size < 1 or not 0 <= rank < world_size:
+            raise ValueError(f"rank {rank} is not one of world_size={world_size} processes")
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.size = size
         self.shuffle = shuffle
         self.seed = seed
         self.epoch = epoch
+        self.batch_size, self.rank, self.world_size = batch_size, rank, world_size
+        self.drop_last = drop_last
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
 
+    def _global_order(self) -> list[int]:
+        if not self.shuffle:
+            return list(range(self.size))
+        state = np.random.SeedSequence([self.seed, self.epoch]).generate_state(1, dtype=np.uint64)[0]
+        gen = torch.Generator().manual_seed(int(state) & 0x7FFF_FFFF_FFFF_FFFF)
+        return torch.randperm(self.size, generator=gen).tolist()
+
+    def _rank_order(self, order: list[int]) -> list[int]:
+        """This rank's share of ``order``: its block of every global batch."""
+        world, per_rank = self.world_size, self.batch_size
+        step = per_rank * world
+        full = len(order) - len(order) % step
+        mine = [
+            i for start in range(0, full, step) for i in order[start + self.rank * per_rank :][:per_rank]
+        ]
+        tail = order[full:]
+        if tail and not self.drop_last:
+            padded = tail + (order * (world // max(len(order), 1) + 1))[: -len(tail) % world]
+            share = len(padded) // world
+            mine += padded[self.rank * share : (self.rank + 1) * share]
+        return mine
+
     def __len__(self) -> int:
-        return self.size
+        if self.world_size == 1:
+            return self.size
+        step = self.batch_size * self.world_size
+        full, tail = divmod(self.size, step)
+        return full * self.batch_size + (0 if self.drop_last or not tail else -(-tail // self.world_size))
 
     def __iter__(self) -> Iterator[tuple[int, int]]:
-        if self.shuffle:
-            state = np.random.SeedSequence([self.seed, self.epoch]).generate_state(
-                1, dtype=np.uint64
-            )[0]
-            gen = torch.Generator().manual_seed(int(state) & 0x7FFF_FFFF_FFFF_FFFF)
-            order = torch.randperm(self.size, generator=gen).tolist()
-        else:
-            order = range(self.size)
+        order = self._global_order()
+        if self.world_size > 1:
+            order = self._rank_order(order)
         epoch = self.epoch
         return iter([(int(i), epoch) for i in order])

@@ -199,13 +199,45 @@ class InteractionDataModule(LightningDataModule):
 
     # ------------------------------------------------------------------ loaders
 
+    def _processes(self) -> tuple[int, int]:
+        """(rank, world size) of the attached trainer; (0, 1) outside one."""
+        trainer = getattr(self, "trainer", None)
+        if trainer is None:
+            return 0, 1
+        rank, world = int(trainer.global_rank), int(trainer.world_size)
+        if world > 1 and getattr(trainer._accelerator_connector, "use_distributed_sampler", False):
+            raise ValueError(
+                "trainer.use_distributed_sampler must be false: the datamodule gives each process "
+                "its block of every global batch itself (a second sampler would drop data)"
+            )
+        return rank, world
+
     def _loader(
-        self, split: Split, *, batch_size: int, shuffle: bool, drop_last: bool, epoch: int = 0
+        self,
+        split: Split,
+        *,
+        batch_size: int,
+        shuffle: bool,
+        drop_last: bool,
+        epoch: int = 0,
+        sharded: bool = True,
     ) -> DataLoader:
+        """``sharded``: under a data-parallel trainer, each rank reads its block of every global
+        batch (``EpochSampler``); the trainer must not add its own distributed sampler."""
         if split not in self.datasets:
             self.setup({"train": "fit", "val": "validate", "test": "test"}[split])
         dataset = self.datasets[split]
-        sampler = EpochSampler(len(dataset), shuffle=shuffle, seed=self.seed, epoch=epoch)
+        rank, world = self._processes() if sharded else (0, 1)
+        sampler = EpochSampler(
+            len(dataset),
+            shuffle=shuffle,
+            seed=self.seed,
+            epoch=epoch,
+            batch_size=batch_size,
+            rank=rank,
+            world_size=world,
+            drop_last=drop_last,
+        )
         return DataLoader(
             dataset,
             batch_size=batch_size,
@@ -252,4 +284,5 @@ class InteractionDataModule(LightningDataModule):
             shuffle=shuffle,
             drop_last=drop_last,
             epoch=epoch,
+            sharded=False,  # protocol passes run whole on one process (rank 0 during training)
         )

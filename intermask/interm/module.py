@@ -35,6 +35,7 @@ from intermask.interm.sampler import (
 from intermask.interm.token_cache import TokenCache, crop_keys
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
+from intermask.utils.distributed import gather_rows, global_mean_scale, local_rows
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.lightning import LossStepsModule
 from intermask.vq.model import MotionVQVAE
@@ -65,6 +66,28 @@ def masked_cross_entropy(
     if not bool(mask.any()):
         return logits.sum() * 0.0
     return F.cross_entropy(logits[mask].float(), targets[mask])
+
+
+def global_masked_cross_entropy(
+    logits: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor
+) -> torch.Tensor:
+    """:func:`masked_cross_entropy` over the masked tokens of the global batch: this rank's sum
+    times world / (masked tokens of all ranks), which data-parallel gradient averaging turns into
+    the one-process mean. Equal to :func:`masked_cross_entropy` in one process."""
+    scale = global_mean_scale(mask.sum())
+    if not bool(mask.any()):
+        return logits.sum() * 0.0
+    total = F.cross_entropy(logits[mask].float(), targets[mask], reduction="sum")
+    return total * scale.to(total.dtype)
+
+
+def _layout_of(lengths_in_steps: torch.Tensor, grid: torch.Size) -> torch.Tensor:
+    """(B,) lengths and (rows, T') -> (B, 2, rows, T') int64: 0 inside each length, -1 after (the
+    padding of :meth:`InterMModule.tokenize`), what the masks depend on."""
+    steps = torch.arange(grid[-1], device=lengths_in_steps.device)
+    inside = steps[None, :] < lengths_in_steps[:, None]  # (B, T')
+    codes = torch.where(inside, 0, -1)
+    return codes[:, None, None, :].expand(-1, 2, *grid[:-1], -1).clone()
 
 
 def masked_accuracy(
@@ -269,32 +292,50 @@ class InterMModule(LossStepsModule):
         out = self.net(tokens[:, 0], tokens[:, 1], text, lengths_in_steps, drop)
         return torch.stack([out.logits_a, out.logits_b], dim=1)  # (B, 2, rows, T', K)
 
-    def compute_losses(self, batch: dict[str, Any], *, condition_drop: float) -> InterMLosses:
+    def compute_losses(
+        self,
+        batch: dict[str, Any],
+        *,
+        condition_drop: float,
+        generator: torch.Generator | None = None,
+    ) -> InterMLosses:
         """Stage-1 masked CE (random / interaction masking + BERT corruption) and, with
-        ``step_unroll``, the stage-2 CE on the re-masked least confident predictions."""
+        ``step_unroll``, the stage-2 CE on the re-masked least confident predictions.
+
+        ``generator`` draws the masks, corruption and condition drops (the trainer's
+        :meth:`batch_generator`). Data parallel: they are drawn for the whole global batch on
+        every rank (:mod:`intermask.utils.distributed`) and the CE is a mean over the
+        global batch's masked tokens, so N processes take the step of one process.
+        """
         targets, lengths_in_steps = self.tokenize(batch)
         text = self.encode_text(batch["caption"])
         vocabulary = self.net.vocabulary
+        mine = local_rows(targets.shape[0])
+        every_length = gather_rows(lengths_in_steps)
+        layout = _layout_of(every_length, targets.shape[2:])  # the global batch, codes unknown
+        layout[mine] = targets
         masking = training_mask(
-            targets[:, 0], targets[:, 1], lengths_in_steps, p_random=self.hparams.p_random
+            layout[:, 0],
+            layout[:, 1],
+            every_length,
+            p_random=self.hparams.p_random,
+            generator=generator,
         )
-        corrupted = bert_corruption(targets, masking.mask, vocabulary)
-        drop = torch.rand(targets.shape[0], device=targets.device) < condition_drop  # (B,)
-        logits = self._forward(corrupted.tokens, text, lengths_in_steps, drop)
-        stage1 = masked_cross_entropy(logits, targets, masking.mask)
-        accuracy = masked_accuracy(logits.detach(), targets, masking.mask)
+        corrupted = bert_corruption(layout, masking.mask, vocabulary, generator=generator).tokens
+        corrupted = corrupted[mine]
+        drawn = torch.rand(layout.shape[0], generator=generator, device=targets.device)
+        drop = drawn[mine] < condition_drop  # (B,)
+        mask, tau = masking.mask[mine], masking.tau[mine]
+        logits = self._forward(corrupted, text, lengths_in_steps, drop)
+        stage1 = global_masked_cross_entropy(logits, targets, mask)
+        accuracy = masked_accuracy(logits.detach(), targets, mask)
         stage2 = stage1.new_zeros(())
         if self.hparams.step_unroll:
             unroll = step_unroll_mask(
-                logits.detach(),
-                corrupted.tokens,
-                masking.mask,
-                masking.tau,
-                lengths_in_steps,
-                vocabulary,
+                logits.detach(), corrupted, mask, tau, lengths_in_steps, vocabulary
             )
             logits2 = self._forward(unroll.tokens, text, lengths_in_steps, drop)
-            stage2 = masked_cross_entropy(logits2, targets, unroll.mask)
+            stage2 = global_masked_cross_entropy(logits2, targets, unroll.mask)
         return InterMLosses(stage1 + stage2, stage1, stage2, accuracy)
 
     def loss_values(self, losses: InterMLosses) -> dict[str, torch.Tensor]:

@@ -157,18 +157,25 @@ class ARFlowModule(LossStepsModule):
         self.reaction_parts()  # the encoder follows the module's device
         return pooled_text(self.text, captions, self.device)
 
-    def compute_losses(self, batch: Mapping[str, Any], *, condition_drop: float) -> ARFlowLosses:
-        """L_all = L_fm + lambda_inter L_inter at a uniformly drawn t per sample."""
+    def compute_losses(
+        self,
+        batch: Mapping[str, Any],
+        *,
+        condition_drop: float,
+        generator: torch.Generator | None = None,
+    ) -> ARFlowLosses:
+        """L_all = L_fm + lambda_inter L_inter at a uniformly drawn t per sample (``generator``
+        draws t and the condition drops; torch's global generator when None)."""
         motion = batch["motion"]
         roles = split_roles(motion, actor_index(batch))
         x0, x1 = self.space.flatten(roles.actor), self.space.flatten(roles.reactor)
         frame_mask = frame_mask_from_lengths(
             torch.as_tensor(batch["length"], device=motion.device), x0.shape[1]
         )
-        t = torch.rand(x0.shape[0], device=x0.device)
+        t = torch.rand(x0.shape[0], generator=generator, device=x0.device)
         x_t = interpolate(x0, x1, t, sigma_min=self.hparams.sigma_min)
         text = self.encode_text(batch.get("caption"))
-        drop = torch.rand(x0.shape[0], device=x0.device) < condition_drop
+        drop = torch.rand(x0.shape[0], generator=generator, device=x0.device) < condition_drop
         x1_hat = self.net(x_t, t, x0, frame_mask, text, drop)
         # geometry (root frames, distances in metres) in float32 even under bf16 autocast
         with torch.autocast(device_type=x0.device.type, enabled=False):

@@ -7,6 +7,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any, NamedTuple
 
 import lightning as L
+import numpy as np
 import torch
 from torch import nn
 
@@ -46,6 +47,29 @@ class ScheduledModule(L.LightningModule):
 
     non_finite_loss: str = "stop"
     skipped_steps: int = 0
+    draw_seed: int = 0  # train.py sets the job's seed
+
+    def batch_generator(self, stage: str, batch_idx: int) -> torch.Generator | None:
+        """The generator of a batch's random draws (masks, corruption, condition drops, code
+        resets): seeded by (``draw_seed``, stage, batch), where a training batch counts from the
+        start of the fit (Lightning restores the count on resume) and a validation batch is its
+        index, so every validation pass draws alike. The draws then depend neither on the
+        number of processes nor on what else used torch's global generator, and a resumed run
+        draws what the uninterrupted one drew. None outside a trainer (the global generator)."""
+        trainer = self._trainer
+        if trainer is None:
+            return None
+        if stage == "train":
+            counter, stream = trainer.fit_loop.epoch_loop.total_batch_idx, 0
+        elif stage == "val":
+            counter, stream = batch_idx, 1
+        else:
+            raise ValueError(f"stage must be 'train' or 'val', got {stage!r}")
+        state = np.random.SeedSequence([self.draw_seed, stream, counter]).generate_state(
+            1, np.uint64
+        )
+        generator = torch.Generator(device=self.device)
+        return generator.manual_seed(int(state[0]) & 0x7FFF_FFFF_FFFF_FFFF)
 
     def skip_non_finite(self, terms: Mapping[str, torch.Tensor], batch: Mapping[str, Any]) -> bool:
         """True when this step must be skipped (policy ``skip``); raises :class:`NonFiniteLoss`
@@ -92,7 +116,7 @@ class ScheduledModule(L.LightningModule):
 class LossStepsModule(ScheduledModule):
     """Training and validation steps of a module trained on one tuple of losses per batch.
 
-    Subclasses provide ``compute_losses(batch, condition_drop=p)`` returning a NamedTuple with a
+    Subclasses provide ``compute_losses(batch, condition_drop=p, generator=g)`` returning a NamedTuple with a
     ``total``, :meth:`loss_values` naming what to log, ``_log_validation_samples(batch)``, and the
     hyper-parameters ``condition_drop`` (training only; validation drops nothing) and
     ``validation_samples`` (generate from the first validation batch when positive).
@@ -113,7 +137,11 @@ class LossStepsModule(ScheduledModule):
             )
 
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor | None:
-        losses = self.compute_losses(batch, condition_drop=self.hparams.condition_drop)
+        losses = self.compute_losses(
+            batch,
+            condition_drop=self.hparams.condition_drop,
+            generator=self.batch_generator("train", batch_idx),
+        )
         if self.skip_non_finite(self.loss_values(losses), batch):
             return None
         self._log_losses("train", losses, batch["motion"].shape[0])
@@ -121,7 +149,9 @@ class LossStepsModule(ScheduledModule):
 
     def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
         with torch.no_grad():
-            losses = self.compute_losses(batch, condition_drop=0.0)
+            losses = self.compute_losses(
+                batch, condition_drop=0.0, generator=self.batch_generator("val", batch_idx)
+            )
         self._log_losses("val", losses, batch["motion"].shape[0])
         if batch_idx == 0 and self.hparams.validation_samples > 0:
             self._log_validation_samples(batch)

@@ -58,11 +58,14 @@ class MotionVQVAE(nn.Module):
         if frames % 4:
             raise ValueError(f"the VQ-VAE needs a multiple of 4 frames, got {frames}")
 
-    def forward(self, features: torch.Tensor) -> VQVAEOutput:
-        """(B, T, *F) normalized features -> reconstruction and quantizer statistics."""
+    def forward(
+        self, features: torch.Tensor, *, generator: torch.Generator | None = None
+    ) -> VQVAEOutput:
+        """(B, T, *F) normalized features -> reconstruction and quantizer statistics;
+        ``generator`` draws the quantizer's random choices (torch's global one when None)."""
         self._check_frames(features.shape[1])
         latent = self.encoder(self.view.to_joints(features))
-        quantized = self.quantizer(latent)
+        quantized = self.quantizer(latent, generator=generator)
         reconstruction = self.view.from_joints(self.decoder(quantized.quantized))
         return VQVAEOutput(
             reconstruction,

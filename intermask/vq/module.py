@@ -88,13 +88,17 @@ class VQVAEModule(ScheduledModule):
         return self.net(features).reconstruction
 
     def _step(
-        self, batch: dict[str, Any], *, measure_unweighted: bool = True
+        self,
+        batch: dict[str, Any],
+        *,
+        measure_unweighted: bool = True,
+        generator: torch.Generator | None = None,
     ) -> tuple[LossTerms, torch.Tensor, Any, Any]:
         motion = batch["motion"]
         frame_mask = batch.get("frame_mask")
         if frame_mask is None:
             frame_mask = torch.ones(motion.shape[:2], dtype=torch.bool, device=motion.device)
-        out = self.net(motion)
+        out = self.net(motion, generator=generator)
         with torch.autocast(device_type=motion.device.type, enabled=False):
             # geometry (Gram-Schmidt, bone lengths, metres) and losses in float32 under bf16
             return self._losses(out, motion.float(), frame_mask, measure_unweighted)
@@ -133,7 +137,9 @@ class VQVAEModule(ScheduledModule):
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor | None:
         logged = writes_step_logs(self)
         # unweighted loss terms only matter on steps whose logs are written
-        terms, _, out, _ = self._step(batch, measure_unweighted=logged)
+        terms, _, out, _ = self._step(
+            batch, measure_unweighted=logged, generator=self.batch_generator("train", batch_idx)
+        )
         if self.skip_non_finite(terms._asdict(), batch):
             return None
         batch_size = batch["motion"].shape[0]

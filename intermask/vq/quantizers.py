@@ -15,6 +15,8 @@ import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 
+from intermask.utils.distributed import all_reduce_sum, gather_rows, process_group
+
 
 class QuantizerOutput(NamedTuple):
     quantized: torch.Tensor  # (B, D, H, W), straight-through: gradients flow to the encoder output
@@ -30,13 +32,6 @@ class ResidualQuantizerOutput(NamedTuple):
     commit_loss: torch.Tensor  # () mean over kept layers (same scale as a single VQ)
     perplexity: torch.Tensor  # (Q,) per layer (0 for dropped layers)
     dead_codes: torch.Tensor  # (Q,) per layer
-
-
-def _all_reduce_sum(tensor: torch.Tensor) -> torch.Tensor:
-    """Sum across DDP ranks so every replica applies the same codebook update."""
-    if dist.is_available() and dist.is_initialized():
-        dist.all_reduce(tensor)
-    return tensor
 
 
 def _perplexity(indices: torch.Tensor, codebook_size: int) -> torch.Tensor:
@@ -88,24 +83,27 @@ class EMAQuantizer(nn.Module):
         self.register_buffer("ema_sum", torch.zeros(codebook_size, dim))
         self.register_buffer("initialized", torch.tensor(False))
 
-    def forward(self, x: torch.Tensor) -> QuantizerOutput:
+    def forward(
+        self, x: torch.Tensor, *, generator: torch.Generator | None = None
+    ) -> QuantizerOutput:
         """(B, D, H, W) -> QuantizerOutput; updates the codebook in training mode.
 
-        Runs in float32 even under autocast: nearest-code search and EMA statistics in bf16 would
-        pick wrong codes and drift.
+        ``generator`` draws the rows that initialise and reset codes (and the Gumbel noise);
+        None uses torch's global generator. Runs in float32 even under autocast: nearest-code
+        search and EMA statistics in bf16 would pick wrong codes and drift.
         """
         with torch.autocast(device_type=x.device.type, enabled=False):
-            return self._quantize(x.float())
+            return self._quantize(x.float(), generator)
 
-    def _quantize(self, x: torch.Tensor) -> QuantizerOutput:
+    def _quantize(self, x: torch.Tensor, generator: torch.Generator | None) -> QuantizerOutput:
         batch, _, height, width = x.shape
         flat = rearrange(x, "b d h w -> (b h w) d")
         if self.training and not bool(self.initialized):
-            self._initialise(flat.detach())
-        indices = self._assign(flat.detach())
+            self._initialise(flat.detach(), generator)
+        indices = self._assign(flat.detach(), generator)
         dead = torch.zeros((), dtype=torch.long, device=x.device)
         if self.training:
-            dead = self._ema_update(flat.detach().float(), indices)
+            dead = self._ema_update(flat.detach().float(), indices, generator)
         quantized_flat = F.embedding(indices, self.codebook)
         commit_loss = F.mse_loss(flat, quantized_flat.detach())
         quantized_flat = flat + (quantized_flat - flat).detach()
@@ -138,35 +136,50 @@ class EMAQuantizer(nn.Module):
         )
 
     @torch.no_grad()
-    def _assign(self, flat: torch.Tensor) -> torch.Tensor:
+    def _assign(self, flat: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         """(N, D) -> (N,) code indices: Gumbel-max sampling in training when configured, else nearest."""
         distances = self._distances(flat)
         if self.training and self.stochastic_temperature is not None:
             gumbel = -torch.log(
-                -torch.log(torch.rand_like(distances).clamp_min(1e-10)).clamp_min(1e-10)
+                -torch.log(
+                    torch.rand(
+                        distances.shape,
+                        generator=generator,
+                        device=distances.device,
+                        dtype=distances.dtype,
+                    ).clamp_min(1e-10)
+                ).clamp_min(1e-10)
             )
             return torch.argmax(-distances / self.stochastic_temperature + gumbel, dim=-1)
         return torch.argmin(distances, dim=-1)
 
     @torch.no_grad()
-    def _random_rows(self, flat: torch.Tensor, count: int) -> torch.Tensor:
-        """``count`` encoder outputs drawn at random (with repetition only when the batch is small)."""
+    def _random_rows(
+        self, flat: torch.Tensor, count: int, generator: torch.Generator | None
+    ) -> torch.Tensor:
+        """``count`` encoder outputs of the global batch (all ranks' rows, gathered) drawn at
+        random, with repetition only when the batch is small: the same rows on every rank and
+        as in one process with the global batch."""
+        flat = gather_rows(flat)
         if flat.shape[0] >= count:
-            return flat[torch.randperm(flat.shape[0], device=flat.device)[:count]]
-        return flat[torch.randint(flat.shape[0], (count,), device=flat.device)]
+            order = torch.randperm(flat.shape[0], generator=generator, device=flat.device)
+            return flat[order[:count]]
+        return flat[torch.randint(flat.shape[0], (count,), generator=generator, device=flat.device)]
 
     @torch.no_grad()
-    def _initialise(self, flat: torch.Tensor) -> None:
-        rows = self._random_rows(flat.float(), self.codebook_size)
-        if dist.is_available() and dist.is_initialized():
-            dist.broadcast(rows, src=0)  # every rank starts from rank 0's codebook
+    def _initialise(self, flat: torch.Tensor, generator: torch.Generator | None) -> None:
+        rows = self._random_rows(flat.float(), self.codebook_size, generator)
+        if process_group()[1] > 1:  # the ranks drew the same rows; rank 0's copy makes it exact
+            dist.broadcast(rows, src=0)
         self.codebook.copy_(rows)
         self.ema_sum.copy_(rows)
         self.ema_count.fill_(1.0)
         self.initialized.fill_(True)
 
     @torch.no_grad()
-    def _ema_update(self, flat: torch.Tensor, indices: torch.Tensor) -> torch.Tensor:
+    def _ema_update(
+        self, flat: torch.Tensor, indices: torch.Tensor, generator: torch.Generator | None
+    ) -> torch.Tensor:
         """EMA step of counts, sums and codes; returns how many dead codes were reset.
 
         Rows with a NaN or infinity (a corrupt batch) count for nothing: a training step that
@@ -174,10 +187,10 @@ class EMAQuantizer(nn.Module):
         """
         valid = torch.isfinite(flat).all(dim=-1)
         flat = torch.where(valid[:, None], flat, torch.zeros_like(flat))
-        counts = _all_reduce_sum(
+        counts = all_reduce_sum(
             torch.bincount(indices, weights=valid.float(), minlength=self.codebook_size).float()
         )
-        sums = _all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
+        sums = all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
         self.ema_count.mul_(self.decay).add_(counts, alpha=1 - self.decay)
         self.ema_sum.mul_(self.decay).add_(sums, alpha=1 - self.decay)
         total = self.ema_count.sum()
@@ -185,8 +198,8 @@ class EMAQuantizer(nn.Module):
         self.codebook.copy_(self.ema_sum / smoothed[:, None])
         dead = self.ema_count < self.reset_threshold
         if dead.any():
-            replacement = self._random_rows(flat, self.codebook_size)
-            if dist.is_available() and dist.is_initialized():
+            replacement = self._random_rows(flat, self.codebook_size, generator)
+            if process_group()[1] > 1:
                 dist.broadcast(replacement, src=0)
             self.codebook[dead] = replacement[dead]
             self.ema_sum[dead] = replacement[dead]
@@ -233,8 +246,15 @@ class ResidualQuantizer(nn.Module):
     def num_quantizers(self) -> int:
         return len(self.layers)
 
-    def forward(self, x: torch.Tensor, active_layers: int | None = None) -> ResidualQuantizerOutput:
-        """(B, D, H, W) -> ResidualQuantizerOutput. ``active_layers`` forces the number of layers used."""
+    def forward(
+        self,
+        x: torch.Tensor,
+        active_layers: int | None = None,
+        *,
+        generator: torch.Generator | None = None,
+    ) -> ResidualQuantizerOutput:
+        """(B, D, H, W) -> ResidualQuantizerOutput. ``active_layers`` forces the number of layers
+        used; ``generator`` draws quantization dropout and the layers' code resets."""
         kept = active_layers or self.num_quantizers
         if (
             active_layers is None
@@ -242,8 +262,12 @@ class ResidualQuantizer(nn.Module):
             and self.num_quantizers > 1
             and self.dropout_prob > 0
         ):
-            if torch.rand(()) < self.dropout_prob:
-                kept = int(torch.randint(1, self.num_quantizers + 1, ()))
+            if torch.rand((), generator=generator, device=x.device) < self.dropout_prob:
+                kept = int(
+                    torch.randint(
+                        1, self.num_quantizers + 1, (), generator=generator, device=x.device
+                    )
+                )
         residual, quantized = x, torch.zeros_like(x)
         batch, _, height, width = x.shape
         indices = x.new_full((batch, self.num_quantizers, height, width), -1, dtype=torch.long)
@@ -251,7 +275,7 @@ class ResidualQuantizer(nn.Module):
         perplexity = x.new_zeros(self.num_quantizers)
         dead = torch.zeros(self.num_quantizers, dtype=torch.long, device=x.device)
         for layer_index, layer in enumerate(self.layers[:kept]):
-            out = layer(residual)
+            out = layer(residual, generator=generator)
             # quantize the residual, but let the straight-through gradient reach x unchanged
             quantized = quantized + out.quantized
             residual = residual - out.quantized.detach()

@@ -32,7 +32,7 @@ EXPERIMENTS = {
     "gen_ablation_no_step_unroll_no_interaction_masking": {"p_random": 1.0, "step_unroll": False},
 }
 CPU_SETTINGS = {"gen_demo"}  # CPU-sized: paper switches, not paper sizes (tested below)
-SYNTHETIC_SETTINGS = {"gen_synthetic_long"}  # the paper network on the demo's data (tested below)
+SYNTHETIC_SETTINGS = {"gen_synthetic_long", "gen_synthetic_long_cpu"}  # long runs (tested below)
 TINY_NET = {
     "codebook_size": 16,
     "width": 32,
@@ -78,6 +78,25 @@ def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
     assert cfg.data.max_length == 96 and net.codebook_size == 512  # the demo's crops and tokens
     assert cfg.trainer.max_epochs == 500 and cfg.trainer.accelerator == "gpu"
     assert cfg.callbacks.protocol.every_n_epochs == 10
+    assert cfg.callbacks.model_checkpoint.monitor == "protocol/fid"
+
+
+def test_long_cpu_run_is_the_demo_network_trained_longer_and_scored_every_1000_steps():
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose(
+            "train_gen",
+            overrides=[
+                "experiment=gen_synthetic_long_cpu",
+                "vq_ckpt=unused",
+                "callbacks.protocol.evaluator=unused.ckpt",
+                "paths.output_dir=/tmp/x",
+            ],
+        )
+    demo = _compose("gen_demo")
+    assert cfg.model.net == demo.model.net and cfg.data.batch_size == demo.data.batch_size
+    assert cfg.trainer.accelerator == "cpu" and cfg.trainer.max_epochs == 100
+    # 100 steps an epoch: a validation every 1,000 steps, each followed by the protocol
+    assert cfg.trainer.check_val_every_n_epoch == 10 and cfg.callbacks.protocol.every_n_epochs == 1
     assert cfg.callbacks.model_checkpoint.monitor == "protocol/fid"
 
 
