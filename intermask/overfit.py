@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import shutil
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -177,6 +178,8 @@ def run(
     """The whole check into ``out``: data (``data/``), tokenizer (``vq/``), generator
     (``gen/``), generation (``overfit.json``)."""
     out = Path(out)
+    for stage in ("vq", "gen"):  # a re-run trains afresh instead of resuming the last run
+        shutil.rmtree(out / stage, ignore_errors=True)
     data_root = write_memorisation_set(out / "data", seed=seed)
     data = f"data.root={data_root}"
     seconds: dict[str, float] = {}

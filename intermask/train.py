@@ -74,6 +74,39 @@ def resume_checkpoint(ckpt_path: str | None, *, allow_remote: bool = False) -> s
     return ckpt_path
 
 
+EXISTING_RUN_POLICIES = ("resume", "refuse")
+
+
+def existing_run_checkpoint(cfg: DictConfig, ckpt_path: str | None) -> str | None:
+    """The checkpoint to resume when the run folder already holds ``checkpoints/last.ckpt``.
+
+    A requeued cluster job (submitit requeues a pre-empted job with the same config, so the same
+    run folder) finds the checkpoint of its previous life there: with ``existing_run=resume``
+    (default) it continues from it, with ``refuse`` it stops. Either way a new run never
+    overwrites the checkpoints of another: resuming from a different ``ckpt_path`` into a folder
+    that holds one is refused.
+    """
+    policy = str(cfg.get("existing_run", "resume"))
+    if policy not in EXISTING_RUN_POLICIES:
+        raise ValueError(f"existing_run must be one of {EXISTING_RUN_POLICIES}, got {policy!r}")
+    last = Path(cfg.paths.output_dir) / "checkpoints" / "last.ckpt"
+    if not last.is_file():
+        return ckpt_path
+    if ckpt_path is not None and Path(ckpt_path).resolve() == last.resolve():
+        return ckpt_path
+    if ckpt_path is None and policy == "resume":
+        log.warning("the run folder already holds %s (a requeued job?): resuming from it", last)
+        return str(last)
+    raise FileExistsError(
+        f"{last} exists: this job would overwrite the checkpoints of the run in that folder. "
+        + (
+            f"Resume it (ckpt_path={last}) or choose another hydra.run.dir"
+            if ckpt_path is not None
+            else "Resume it (existing_run=resume) or choose another hydra.run.dir"
+        )
+    )
+
+
 def non_finite_policy(cfg: DictConfig) -> str:
     """``non_finite_loss`` of the job config: ``stop`` (default) or ``skip``."""
     policy = str(cfg.get("non_finite_loss", "stop"))
@@ -122,6 +155,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     ckpt_path = resume_checkpoint(
         cfg.get("ckpt_path"), allow_remote=bool(cfg.get("allow_remote_ckpt", False))
     )
+    ckpt_path = existing_run_checkpoint(cfg, ckpt_path)
     non_finite = non_finite_policy(cfg)  # settings are checked before any data is read
     output_dir = Path(cfg.paths.output_dir)
     precision = decide_precision(cfg)

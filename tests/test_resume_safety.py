@@ -48,3 +48,40 @@ def test_a_truncated_checkpoint_is_refused_by_name(synthetic_interhuman_root, tm
     cfg = _config(synthetic_interhuman_root, tmp_path / "run", [f"ckpt_path={broken}"])
     with pytest.raises(CorruptCheckpoint, match=rf"{broken}: not a readable checkpoint"):
         train(cfg)
+
+
+def _existing_run(tmp_path):
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "checkpoints" / "last.ckpt").write_bytes(b"the previous run's checkpoint")
+    return run
+
+
+def test_a_folder_holding_a_run_is_never_overwritten(synthetic_interhuman_root, tmp_path):
+    run = _existing_run(tmp_path)
+    last = run / "checkpoints" / "last.ckpt"
+    refuse = _config(synthetic_interhuman_root, run, ["existing_run=refuse"])
+    with pytest.raises(FileExistsError, match=rf"{last} exists: .*\(existing_run=resume\)"):
+        train(refuse)
+    other = tmp_path / "other.ckpt"
+    torch.save({"state_dict": {}}, other)
+    elsewhere = _config(synthetic_interhuman_root, run, [f"ckpt_path={other}"])
+    with pytest.raises(FileExistsError, match=rf"Resume it \(ckpt_path={last}\) or choose"):
+        train(elsewhere)
+    bad = _config(synthetic_interhuman_root, run, ["existing_run=overwrite"])
+    with pytest.raises(ValueError, match="existing_run must be one of .*got 'overwrite'"):
+        train(bad)
+    assert last.read_bytes() == b"the previous run's checkpoint"
+
+
+@pytest.mark.slow
+def test_a_requeued_job_resumes_the_checkpoint_in_its_run_folder(
+    synthetic_interhuman_root, tmp_path, caplog
+):
+    run = tmp_path / "run"
+    train(_config(synthetic_interhuman_root, run))  # 1 epoch of 3 steps, then "pre-empted"
+    with caplog.at_level("WARNING", logger="intermask.train"):
+        train(_config(synthetic_interhuman_root, run, ["trainer.max_epochs=2"]))  # same command
+    assert "already holds" in caplog.text and "resuming from it" in caplog.text
+    checkpoint = torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)
+    assert checkpoint["global_step"] == 6  # continued at step 3, not restarted
