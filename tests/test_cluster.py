@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+import torch
 from hydra import compose, initialize_config_dir
+from lightning.pytorch import Callback
 
 from intermask.train import CONFIG_DIR
 
@@ -107,3 +111,62 @@ def test_the_slurm_preset_composes_with_the_generator_job():
             return_hydra_config=True,
         )
     assert cfg.hydra.launcher.tasks_per_node == cfg.hydra.launcher.gpus_per_node
+
+
+class PreemptOnce(Callback):
+    """Sends this process the pre-emption signal submitit listens for (USR2) at batch 1 of
+    epoch 1, once per run folder (the requeued job finds the marker and runs on)."""
+
+    def __init__(self, marker: str) -> None:
+        self.marker = Path(marker)
+
+    def on_train_batch_start(self, trainer, pl_module, batch, batch_idx) -> None:
+        if trainer.current_epoch == 1 and batch_idx == 1 and not self.marker.exists():
+            self.marker.touch()
+            os.kill(os.getpid(), signal.SIGUSR2)
+
+
+@pytest.mark.slow
+def test_a_preempted_job_is_requeued_and_resumes_its_checkpoint(
+    synthetic_interhuman_root, tmp_path
+):
+    sweep = tmp_path / "sweep"
+    command = [
+        sys.executable,
+        "-m",
+        "intermask.train",
+        "--config-name",
+        "train_vq",
+        "--multirun",
+        "hydra/launcher=submitit_local",
+        "hydra.launcher.timeout_min=10",
+        f"hydra.sweep.dir={sweep}",
+        f"data.root={synthetic_interhuman_root}",
+        "data.batch_size=16",
+        "data.num_workers=0",
+        "model.net.encoder.width=16",
+        "model.net.quantizer.codebook_size=16",
+        "trainer=cpu",
+        "trainer.max_epochs=2",
+        "trainer.limit_train_batches=3",
+        "trainer.limit_val_batches=1",
+        "callbacks.rich_progress_bar=null",
+        "callbacks.sample_animations=null",
+        "+callbacks.preempt._target_=test_cluster.PreemptOnce",
+        f"+callbacks.preempt.marker={sweep / '0' / 'preempted'}",
+    ]
+    environment = {
+        **os.environ,
+        "OMP_NUM_THREADS": "1",
+        "PYTHONPATH": os.pathsep.join([str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]),
+    }
+    done = subprocess.run(command, cwd=ROOT, env=environment, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    run = sweep / "0"
+    assert (run / "preempted").is_file()  # the signal was sent ...
+    logs = "".join(p.read_text() for p in (sweep / ".submitit").rglob("*_log.*"))
+    assert "Caught signal SIGUSR2" in logs and "Requeued job" in logs  # ... submitit requeued
+    train_log = (run / "train.log").read_text()
+    assert "already holds" in train_log and "resuming from it" in train_log
+    checkpoint = torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)
+    assert checkpoint["global_step"] == 6  # epoch 0 kept, epoch 1 redone and finished
