@@ -20,12 +20,13 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
+from intermask.config_files import config_dir
 from intermask.interm.decoding import Edit
 from intermask.interm.load import LoadedGenerator
 from intermask.interm.sampler import FRAMES_PER_STEP, InteractionSampler
 from intermask.utils.files import file_hash
 
-CONFIG_PATH = Path(__file__).resolve().parents[1] / "configs" / "generate.yaml"
+CONFIG_PATH = config_dir() / "generate.yaml"
 MAX_FRAMES = {"interhuman": 300, "interx": 148}  # longest training clips (multiples of 4)
 
 

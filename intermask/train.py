@@ -14,13 +14,14 @@ import lightning as L
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from intermask.config_files import config_dir
 from intermask.utils.checkpoint_io import AtomicCheckpointIO
 from intermask.utils.lightning import NON_FINITE_POLICIES
 from intermask.utils.precision import PrecisionChoice, resolve_precision
 from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
-CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
+CONFIG_DIR = str(config_dir())
 # ${div:a,b} in configs, e.g. the generator's warm-up of a quarter epoch as a share of all steps
 if not OmegaConf.has_resolver("div"):
     OmegaConf.register_new_resolver("div", lambda numerator, denominator: numerator / denominator)
