@@ -21,8 +21,8 @@ import torch
 from lightning.pytorch.callbacks import Callback
 
 from intermask.metrics.interaction import SuccessThresholds
-from intermask.metrics.protocol import ProtocolConstants, ProtocolRunner
-from intermask.metrics.sources import GroundTruth, InterMaskGeneration, motion_joints
+from intermask.evaluation.protocol import ProtocolConstants, ProtocolRunner
+from intermask.evaluation.sources import GroundTruth, InterMaskGeneration, motion_joints
 
 log = logging.getLogger(__name__)
 

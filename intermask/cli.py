@@ -71,7 +71,8 @@ def _data_check(args: argparse.Namespace) -> int:
 
 
 def _data_stats(args: argparse.Namespace) -> int:
-    from intermask.data.normalization import compute_and_save_stats, default_stats_dir
+    from intermask.data.normalization import default_stats_dir
+    from intermask.data.statistics import compute_and_save_stats
 
     root = Path(args.root)
     dataset_format = _resolve_format(root, args.format)
@@ -96,7 +97,7 @@ def _data_item(args: argparse.Namespace) -> int:
 
 
 def _data_success_stats(args: argparse.Namespace) -> int:
-    from intermask.metrics.success_stats import success_statistics
+    from intermask.evaluation.success_stats import success_statistics
 
     root = Path(args.root)
     statistics = success_statistics(
@@ -323,7 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="interaction-success signals of a labelled dataset's GT, with the GT pass rates",
         description="Items are read as the evaluation protocol reads them (random crop of "
         "--max-length frames, person order drawn per item, pass --epoch); the thresholds in "
-        "use and the suggested ones (intermask.metrics.success_stats) are printed.",
+        "use and the suggested ones (intermask.evaluation.success_stats) are printed.",
     )
     success.add_argument("root", type=Path)
     _add_format_option(success)

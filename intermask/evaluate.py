@@ -1,7 +1,7 @@
 """Run the evaluation protocol: ``python -m intermask.evaluate [mode=...] gen_ckpt=... eval_ckpt=...``.
 
 Thin by design: build the rows of the table for the chosen mode, run
-:class:`~intermask.metrics.protocol.ProtocolRunner`, write JSON + Markdown, log to TensorBoard and
+:class:`~intermask.evaluation.protocol.ProtocolRunner`, write JSON + Markdown, log to TensorBoard and
 print the table. ``make eval`` wraps it.
 """
 
@@ -18,9 +18,9 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from intermask.metrics.protocol import MotionSource, ProtocolConstants, ProtocolRunner
-from intermask.metrics.report import markdown_table, write_results
-from intermask.metrics.sources import (
+from intermask.evaluation.protocol import MotionSource, ProtocolConstants, ProtocolRunner
+from intermask.evaluation.report import markdown_table, write_results
+from intermask.evaluation.sources import (
     ARFlowReaction,
     GroundTruth,
     InterMaskGeneration,

@@ -292,7 +292,7 @@ def test_periodic_protocol_logs_quality_during_generator_training(
 
 def test_periodic_protocol_rejects_bad_settings(tmp_path):
     from callbacks.protocol import PeriodicProtocol
-    from intermask.metrics.protocol import ProtocolConstants
+    from intermask.evaluation.protocol import ProtocolConstants
 
     with pytest.raises(FileNotFoundError, match="missing.ckpt: evaluator checkpoint not found"):
         PeriodicProtocol(evaluator=str(tmp_path / "missing.ckpt"), constants=ProtocolConstants())

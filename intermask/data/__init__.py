@@ -10,7 +10,8 @@ from intermask.data.errors import DataError, DataProblem, SkippedClip
 from intermask.data.interhuman import InterHumanDataset
 from intermask.data.interx import InterXDataset
 from intermask.data.item import ExportedItem, export_item, load_item
-from intermask.data.normalization import Normalizer, compute_and_save_stats, default_stats_dir
+from intermask.data.normalization import Normalizer, default_stats_dir
+from intermask.data.statistics import compute_and_save_stats
 from intermask.data.validation import CheckReport, check_dataset, check_dataset_report
 from intermask.data.windows import WindowIndex, build_window_index, window_count
 

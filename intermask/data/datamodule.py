@@ -22,12 +22,8 @@ from intermask.data.errors import DataError
 from intermask.data.interhuman import InterHumanDataset
 from intermask.data.interx import FEATURE_SHAPE as INTERX_FEATURE_SHAPE
 from intermask.data.interx import InterXDataset
-from intermask.data.normalization import (
-    Normalizer,
-    compute_and_save_stats,
-    default_stats_dir,
-    stats_exist,
-)
+from intermask.data.normalization import Normalizer, default_stats_dir, stats_exist
+from intermask.data.statistics import compute_and_save_stats
 from intermask.motion.interhuman import FEATURE_DIM
 
 log = logging.getLogger(__name__)

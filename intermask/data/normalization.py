@@ -201,48 +201,6 @@ def default_stats_dir(root: str | Path) -> Path:
     return Path(root) / STATS_DIRNAME
 
 
-def compute_and_save_stats(
-    root: str | Path,
-    *,
-    dataset: DatasetKind,
-    split: str = "train",
-    out_dir: str | Path | None = None,
-    min_std: float = 1e-3,
-) -> Normalizer:
-    """Compute statistics from ``split`` of the dataset under ``root`` and save them.
-
-    InterHuman: canonicalized full training clips, both persons (person 2 in person 1's frame),
-    both choices of reference person and their mirrored copies. Inter-X: the (56, 6) person
-    representation of both persons. Saved to ``out_dir`` (default ``<root>/stats``).
-    """
-    # Imported here: the readers import this module for Normalizer.
-    if dataset == "interhuman":
-        from intermask.data.interhuman import InterHumanDataset, interhuman_stats_sequences
-
-        ds = InterHumanDataset(
-            root=root, split=split, mode="interaction", mirror=False, swap_persons=False
-        )
-        sequences, shape = interhuman_stats_sequences(ds), (ds.feature_dim,)
-    elif dataset == "interx":
-        from intermask.data.interx import InterXDataset, interx_stats_sequences
-
-        ds = InterXDataset(root=root, split=split, mode="interaction", swap_persons=False)
-        sequences, shape = interx_stats_sequences(ds), ds.feature_shape
-    else:
-        raise ValueError(f"dataset must be 'interhuman' or 'interx', got {dataset!r}")
-    normalizer, info = compute_normalizer(sequences, feature_shape=shape, min_std=min_std)
-    info.update(
-        {
-            "dataset": dataset,
-            "split": split,
-            "root": str(Path(root).resolve()),
-            "num_clips": len(ds.clip_ids),
-        }
-    )
-    normalizer.save(out_dir if out_dir is not None else default_stats_dir(root), provenance=info)
-    return normalizer
-
-
 def _check_stats(mean: torch.Tensor, std: torch.Tensor, source: str) -> None:
     if mean.shape != std.shape:
         raise DataError(f"{source}: mean shape {tuple(mean.shape)} != std shape {tuple(std.shape)}")

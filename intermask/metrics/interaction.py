@@ -9,7 +9,7 @@ canonical frame, ground truth need not be).
 
 Each action is a conjunction of checks (:class:`Check`): a named *signal* of the motion
 (``measure``) compared with a named threshold of :class:`SuccessThresholds`. The thresholds sit
-only there; ``intermask.metrics.success_stats.success_statistics`` measures the signals on a
+only there; ``intermask.evaluation.success_stats.success_statistics`` measures the signals on a
 dataset's ground truth, which is where the defaults come from (see the comments on the fields).
 A predicate judges the frames it is given: a crop that starts after the actor's part, or ends
 before the reactor's, can fail for the ground truth too (success-stats says how often).
@@ -36,7 +36,7 @@ class SuccessThresholds:
 
     Measured with ``intermask data success-stats data/synthetic/interhuman --max-length 300``
     (the embedded dataset, 1000 clips, seed 0, all splits, full clips; see
-    :mod:`intermask.metrics.success_stats`): an "above" threshold is 0.75 x the GT signal's 1st
+    :mod:`intermask.evaluation.success_stats`): an "above" threshold is 0.75 x the GT signal's 1st
     percentile, a "below" one 1.25 x its 99th, rounded outward to 0.01 and taken over every
     signal that shares it; the comments give the percentiles. The GT passes by construction and
     a model gets a quarter of the GT's value as tolerance. The last block is definitions.

@@ -7,7 +7,8 @@ from builders import write_interhuman, write_interx
 
 from intermask.data.errors import DataError
 from intermask.data.interhuman import InterHumanDataset
-from intermask.data.normalization import Normalizer, compute_and_save_stats, compute_normalizer
+from intermask.data.normalization import Normalizer, compute_normalizer
+from intermask.data.statistics import compute_and_save_stats
 from intermask.motion.skeleton import MIRROR_PERMUTATION
 
 

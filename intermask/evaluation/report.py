@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from intermask.metrics.protocol import ProtocolResult, Summary
+from intermask.evaluation.protocol import ProtocolResult, Summary
 
 # (key, heading, direction): the paper's columns in its order, then the extra ones we report
 COLUMNS: tuple[tuple[str, str, str], ...] = (

@@ -10,7 +10,7 @@ import torch
 
 from intermask.data.common import single_threaded
 from intermask.data.synthetic import generate_clip
-from intermask.metrics.protocol import (
+from intermask.evaluation.protocol import (
     MotionSource,
     ProtocolConstants,
     ProtocolRunner,
@@ -18,7 +18,7 @@ from intermask.metrics.protocol import (
     repeat_items,
     sample_seeds,
 )
-from intermask.metrics.report import format_summary, markdown_table, write_results
+from intermask.evaluation.report import format_summary, markdown_table, write_results
 
 ITEMS, FRAMES, DIM = 48, 8, 6
 

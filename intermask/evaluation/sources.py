@@ -12,9 +12,9 @@ import torch
 from einops import rearrange
 
 from intermask.data.normalization import Normalizer
+from intermask.evaluation.protocol import Batch, MotionSource
 from intermask.interm.sampler import FRAMES_PER_STEP, InteractionSampler, joints_from_features
 from intermask.metrics.mpjpe import MPJPE
-from intermask.metrics.protocol import Batch, MotionSource
 from intermask.motion import interhuman as ih
 from intermask.motion import interx as ix
 from intermask.physics.volume import DEFAULT_PITCH, DEFAULT_TOLERANCE, intersection_volume

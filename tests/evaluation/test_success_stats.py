@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from intermask.cli import main as cli
+from intermask.evaluation.success_stats import TOLERANCE, UNMEASURED, success_statistics
 from intermask.metrics.interaction import CHECKS, SuccessThresholds
-from intermask.metrics.success_stats import TOLERANCE, UNMEASURED, success_statistics
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from intermask.metrics.protocol import MotionSource
-from intermask.metrics.sources import Measured, feature_joints
+from intermask.evaluation.protocol import MotionSource
+from intermask.evaluation.sources import Measured, feature_joints
 from intermask.motion.skeleton import rest_pose_positions
 
 

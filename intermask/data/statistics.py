@@ -1,0 +1,52 @@
+"""Normalization statistics of a dataset, computed by reading its training split with the
+readers (which themselves only need :class:`~intermask.data.normalization.Normalizer`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from intermask.data.interhuman import InterHumanDataset, interhuman_stats_sequences
+from intermask.data.interx import InterXDataset, interx_stats_sequences
+from intermask.data.normalization import (
+    DatasetKind,
+    Normalizer,
+    compute_normalizer,
+    default_stats_dir,
+)
+
+
+def compute_and_save_stats(
+    root: str | Path,
+    *,
+    dataset: DatasetKind,
+    split: str = "train",
+    out_dir: str | Path | None = None,
+    min_std: float = 1e-3,
+) -> Normalizer:
+    """Compute statistics from ``split`` of the dataset under ``root`` and save them.
+
+    InterHuman: canonicalized full training clips, both persons (person 2 in person 1's frame),
+    both choices of reference person and their mirrored copies. Inter-X: the (56, 6) person
+    representation of both persons. Saved to ``out_dir`` (default ``<root>/stats``).
+    """
+    if dataset == "interhuman":
+        ds = InterHumanDataset(
+            root=root, split=split, mode="interaction", mirror=False, swap_persons=False
+        )
+        sequences, shape = interhuman_stats_sequences(ds), (ds.feature_dim,)
+    elif dataset == "interx":
+        ds = InterXDataset(root=root, split=split, mode="interaction", swap_persons=False)
+        sequences, shape = interx_stats_sequences(ds), ds.feature_shape
+    else:
+        raise ValueError(f"dataset must be 'interhuman' or 'interx', got {dataset!r}")
+    normalizer, info = compute_normalizer(sequences, feature_shape=shape, min_std=min_std)
+    info.update(
+        {
+            "dataset": dataset,
+            "split": split,
+            "root": str(Path(root).resolve()),
+            "num_clips": len(ds.clip_ids),
+        }
+    )
+    normalizer.save(out_dir if out_dir is not None else default_stats_dir(root), provenance=info)
+    return normalizer
