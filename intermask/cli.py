@@ -158,6 +158,7 @@ def _generate(args: argparse.Namespace) -> int:
 
     from intermask import generate as gen
     from intermask.interm.load import load_generator
+    from intermask.vq.model import FRAMES_PER_STEP
 
     defaults = gen.default_settings()
     if bool(args.text) == bool(args.prompts) and not args.reaction:
@@ -198,7 +199,7 @@ def _generate(args: argparse.Namespace) -> int:
         if motion.shape[0] != 2:
             raise ValueError(f"{args.edit}: editing needs both persons, (2, T, ...) features")
         region = gen.edit_region(
-            motion.shape[1] // 4, args.frames_range, args.person, generator.net.rows
+            motion.shape[1] // FRAMES_PER_STEP, args.frames_range, args.person, generator.net.rows
         )
         edit = (motion, region)
     else:

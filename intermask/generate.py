@@ -23,8 +23,9 @@ from omegaconf import OmegaConf
 from intermask.config_files import config_dir
 from intermask.interm.decoding import Edit
 from intermask.interm.load import LoadedGenerator
-from intermask.interm.sampler import FRAMES_PER_STEP, InteractionSampler
+from intermask.interm.sampler import InteractionSampler
 from intermask.utils.files import file_hash
+from intermask.vq.model import FRAMES_PER_STEP
 
 CONFIG_PATH = config_dir() / "generate.yaml"
 MAX_FRAMES = {"interhuman": 300, "interx": 148}  # longest training clips (multiples of 4)

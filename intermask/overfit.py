@@ -32,9 +32,10 @@ from intermask.data.datamodule import InteractionDataModule
 from intermask.data.synthetic import ACTIONS, generate_dataset
 from intermask.data.synthetic.writers import SPLITS
 from intermask.interm.load import load_generator
-from intermask.interm.sampler import FRAMES_PER_STEP, InteractionSampler, joints_from_features
+from intermask.interm.sampler import InteractionSampler, joints_from_features
 from intermask.metrics.interaction import interaction_success
 from intermask.train import CONFIG_DIR, train
+from intermask.vq.model import FRAMES_PER_STEP
 
 log = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ from einops import rearrange
 
 from intermask.data.normalization import Normalizer
 from intermask.evaluation.protocol import Batch, MotionSource
-from intermask.interm.sampler import FRAMES_PER_STEP, InteractionSampler, joints_from_features
+from intermask.interm.sampler import InteractionSampler, joints_from_features
 from intermask.metrics.mpjpe import MPJPE
 from intermask.motion import interhuman as ih
 from intermask.motion import interx as ix
@@ -21,7 +21,7 @@ from intermask.physics.volume import DEFAULT_PITCH, DEFAULT_TOLERANCE, intersect
 from intermask.reaction.guidance import Guidance
 from intermask.reaction.roles import actor_index
 from intermask.reaction.sampler import sample_reactions
-from intermask.vq.model import MotionVQVAE
+from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 
 
 def token_lengths(batch: Batch, frames: int) -> torch.Tensor:

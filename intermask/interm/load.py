@@ -39,7 +39,7 @@ def check_vq_matches(
 ) -> None:
     """Refuse a VQ-VAE whose tokens are not the ones the generator was trained on: another
     codebook size or row count, or (when the checkpoint records it) other weights."""
-    codes, rows = vq.quantizer.layers[0].codebook_size, vq.token_rows
+    codes, rows = vq.quantizer.codebook_size, vq.token_rows
     if (codes, rows) != (net.codebook_size, net.rows):
         raise ValueError(
             f"{vq_path}: a VQ-VAE with {codes} codes x {rows} rows cannot decode the tokens of "

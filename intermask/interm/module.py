@@ -27,7 +27,6 @@ from intermask.interm.masking import (
 )
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.interm.sampler import (
-    FRAMES_PER_STEP,
     GeneratedMotion,
     InteractionSampler,
     joints_from_features,
@@ -38,7 +37,7 @@ from intermask.text.cache import TextFeatureCache
 from intermask.utils.distributed import gather_rows, global_mean_scale, local_rows
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.lightning import LossStepsModule
-from intermask.vq.model import MotionVQVAE
+from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 from intermask.vq.views import TwoPersonView
 
 
@@ -151,7 +150,7 @@ class InterMModule(LossStepsModule):
         super().__init__()
         if isinstance(vq.view, TwoPersonView):
             raise ValueError("the Inter-M Transformer needs a single-person VQ-VAE, got persons=2")
-        vq_codes = vq.quantizer.layers[0].codebook_size
+        vq_codes = vq.quantizer.codebook_size
         if vq_codes != net.codebook_size:
             raise ValueError(
                 f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"

@@ -15,9 +15,7 @@ from einops import rearrange
 from intermask.interm.decoding import CFG_SCALE, ITERATIONS, TOP_K_RATIO, Edit, generate
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.text.cache import TextFeatureCache
-from intermask.vq.model import MotionVQVAE
-
-FRAMES_PER_STEP = 4  # the VQ-VAE downsamples time by 4 (two stride-2 stages)
+from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 
 
 class GeneratedMotion(NamedTuple):
@@ -81,7 +79,7 @@ class InteractionSampler:
 
     def tokenize(self, motion: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
         """(B, 2, T, *F) normalized features, (B,) frames -> (B, 2, rows, T/4) base-layer codes
-        (-1 beyond ``lengths // 4``), for reaction and inpainting inputs."""
+        (-1 beyond ``lengths // FRAMES_PER_STEP``), for reaction and inpainting inputs."""
         tokens = [self.vq.encode(motion[:, person], lengths)[:, 0] for person in range(2)]
         return torch.stack(tokens, dim=1)
 

@@ -11,6 +11,10 @@ from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.quantizers import ResidualQuantizer
 from intermask.vq.views import TwoPersonView
 
+FRAMES_PER_STEP = (
+    4  # one token step covers 4 frames: the encoder halves time twice (convolutions.py)
+)
+
 
 class VQVAEOutput(NamedTuple):
     reconstruction: torch.Tensor  # (B, T, *F) normalized features
@@ -55,8 +59,10 @@ class MotionVQVAE(nn.Module):
 
     @staticmethod
     def _check_frames(frames: int) -> None:
-        if frames % 4:
-            raise ValueError(f"the VQ-VAE needs a multiple of 4 frames, got {frames}")
+        if frames % FRAMES_PER_STEP:
+            raise ValueError(
+                f"the VQ-VAE needs a multiple of {FRAMES_PER_STEP} frames, got {frames}"
+            )
 
     def forward(
         self, features: torch.Tensor, *, generator: torch.Generator | None = None
@@ -79,14 +85,16 @@ class MotionVQVAE(nn.Module):
     def encode(self, features: torch.Tensor, lengths: torch.Tensor | None = None) -> torch.Tensor:
         """(B, T, *F) normalized features -> (B, Q, rows, T/4) nearest-code indices.
 
-        With ``lengths`` (B,) in frames, token steps at or beyond ``lengths // 4`` (padding; the
+        With ``lengths`` (B,) in frames, token steps at or beyond ``lengths // FRAMES_PER_STEP`` (padding; the
         generator works on lengths rounded down to a multiple of 4) are set to -1.
         """
         self._check_frames(features.shape[1])
         indices = self.quantizer.encode(self.encoder(self.view.to_joints(features)))
         if lengths is not None:
             steps = torch.arange(indices.shape[-1], device=indices.device)
-            padding = steps[None, :] >= (lengths.to(indices.device) // 4)[:, None]  # (B, T/4)
+            padding = (
+                steps[None, :] >= (lengths.to(indices.device) // FRAMES_PER_STEP)[:, None]
+            )  # (B, T/4)
             indices = indices.masked_fill(padding[:, None, None, :], -1)
         return indices
 

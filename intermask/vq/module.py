@@ -152,7 +152,7 @@ class VQVAEModule(ScheduledModule):
             batch_size=batch_size,
             prog_bar=False,
         )
-        codebook_size = self.net.quantizer.layers[0].codebook_size
+        codebook_size = self.net.quantizer.codebook_size
         for layer, (perplexity, dead) in enumerate(
             zip(out.perplexity, out.dead_codes, strict=True)
         ):

@@ -246,6 +246,11 @@ class ResidualQuantizer(nn.Module):
     def num_quantizers(self) -> int:
         return len(self.layers)
 
+    @property
+    def codebook_size(self) -> int:
+        """Codes per layer (every layer has the same number)."""
+        return self.layers[0].codebook_size
+
     def forward(
         self,
         x: torch.Tensor,
