@@ -20,9 +20,9 @@ import lightning as L
 import torch
 from lightning.pytorch.callbacks import Callback
 
-from intermask.metrics.interaction import SuccessThresholds
 from intermask.evaluation.protocol import ProtocolConstants, ProtocolRunner
 from intermask.evaluation.sources import GroundTruth, InterMaskGeneration, motion_joints
+from intermask.metrics.interaction import SuccessThresholds
 
 log = logging.getLogger(__name__)
 

@@ -16,13 +16,13 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from intermask.data.layout import FORMATS
+from intermask.motion.kinds import DATASET_KINDS
 
 
 def _add_format_option(parser: argparse.ArgumentParser, required: bool = False) -> None:
     parser.add_argument(
         "--format",
-        choices=FORMATS,
+        choices=DATASET_KINDS,
         required=required,
         help="dataset layout" + ("" if required else " (default: detected from the folder)"),
     )

@@ -204,7 +204,9 @@ class EpochSampler(Sampler[tuple[int, int]]):
     def _global_order(self) -> list[int]:
         if not self.shuffle:
             return list(range(self.size))
-        state = np.random.SeedSequence([self.seed, self.epoch]).generate_state(1, dtype=np.uint64)[0]
+        state = np.random.SeedSequence([self.seed, self.epoch]).generate_state(1, dtype=np.uint64)[
+            0
+        ]
         gen = torch.Generator().manual_seed(int(state) & 0x7FFF_FFFF_FFFF_FFFF)
         return torch.randperm(self.size, generator=gen).tolist()
 
@@ -214,7 +216,9 @@ class EpochSampler(Sampler[tuple[int, int]]):
         step = per_rank * world
         full = len(order) - len(order) % step
         mine = [
-            i for start in range(0, full, step) for i in order[start + self.rank * per_rank :][:per_rank]
+            i
+            for start in range(0, full, step)
+            for i in order[start + self.rank * per_rank :][:per_rank]
         ]
         tail = order[full:]
         if tail and not self.drop_last:
@@ -228,7 +232,9 @@ class EpochSampler(Sampler[tuple[int, int]]):
             return self.size
         step = self.batch_size * self.world_size
         full, tail = divmod(self.size, step)
-        return full * self.batch_size + (0 if self.drop_last or not tail else -(-tail // self.world_size))
+        return full * self.batch_size + (
+            0 if self.drop_last or not tail else -(-tail // self.world_size)
+        )
 
     def __iter__(self) -> Iterator[tuple[int, int]]:
         order = self._global_order()

@@ -25,10 +25,10 @@ from intermask.data.interx import InterXDataset
 from intermask.data.normalization import Normalizer, default_stats_dir, stats_exist
 from intermask.data.statistics import compute_and_save_stats
 from intermask.motion.interhuman import FEATURE_DIM
+from intermask.motion.kinds import DatasetKind, check_dataset_kind
 
 log = logging.getLogger(__name__)
 
-DatasetKind = Literal["interhuman", "interx"]
 Mode = Literal["interaction", "window"]
 Split = Literal["train", "val", "test"]
 DEFAULT_MAX_LENGTH = {"interhuman": 300, "interx": 150}  # frames (InterGen / InterMask settings)
@@ -77,8 +77,7 @@ class InteractionDataModule(LightningDataModule):
         synthetic_seed: int = 0,
     ):
         super().__init__()
-        if dataset not in ("interhuman", "interx"):
-            raise ValueError(f"dataset must be 'interhuman' or 'interx', got {dataset!r}")
+        check_dataset_kind(dataset)
         if mode not in ("interaction", "window"):
             raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
         if batch_size < 1:

@@ -17,8 +17,8 @@ from intermask.data import interhuman as ih
 from intermask.data import interx as ix
 from intermask.data.common import read_id_list
 from intermask.data.errors import DataError
-from intermask.data.layout import DatasetFormat
 from intermask.motion.interx import to_joint_positions
+from intermask.motion.kinds import DatasetKind, check_dataset_kind
 
 
 class ExportedItem(NamedTuple):
@@ -34,7 +34,7 @@ class ExportedItem(NamedTuple):
 
 def load_item(
     root: str | Path,
-    format: DatasetFormat,
+    format: DatasetKind,
     split: str,
     clip_id: str,
     *,
@@ -42,7 +42,7 @@ def load_item(
 ) -> tuple[torch.Tensor, list[str]]:
     """(features (2, T, C...), captions) of one clip, augmentation off."""
     root = Path(root)
-    if format == "interhuman":
+    if check_dataset_kind(format, name="format") == "interhuman":
         layout = ih.InterHumanLayout(root)
         ih.check_root(root)
         _check_listed(layout.split_file(split), split, clip_id)
@@ -55,22 +55,20 @@ def load_item(
         raw = ih.body_to_raw(body)
         features = ih.interaction_features(raw[:, 0], raw[:, 1]).transpose(0, 1)  # (2, T-1, 262)
         return features, captions
-    if format == "interx":
-        layout = ix.InterXLayout(root)
-        if not root.is_dir():
-            raise DataError(f"{root}: dataset root not found (expected the Inter-X folder)")
-        _check_listed(layout.split_file(split), split, clip_id)
-        h5_path = layout.motion_file(split)
-        with ix.open_h5(h5_path) as file:
-            raw = ix.read_h5_clip(file, h5_path, clip_id)
-        captions = [c.text for c in ix.read_captions(layout.caption_file(clip_id))]
-        return ix.person_features(torch.from_numpy(raw[:max_length])), captions
-    raise ValueError(f"format must be 'interhuman' or 'interx', got {format!r}")
+    layout = ix.InterXLayout(root)
+    if not root.is_dir():
+        raise DataError(f"{root}: dataset root not found (expected the Inter-X folder)")
+    _check_listed(layout.split_file(split), split, clip_id)
+    h5_path = layout.motion_file(split)
+    with ix.open_h5(h5_path) as file:
+        raw = ix.read_h5_clip(file, h5_path, clip_id)
+    captions = [c.text for c in ix.read_captions(layout.caption_file(clip_id))]
+    return ix.person_features(torch.from_numpy(raw[:max_length])), captions
 
 
 def export_item(
     root: str | Path,
-    format: DatasetFormat,
+    format: DatasetKind,
     split: str,
     clip_id: str,
     out_path: str | Path,

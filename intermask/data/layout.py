@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
 
-DatasetFormat = Literal["interhuman", "interx"]
-FORMATS: tuple[str, ...] = ("interhuman", "interx")
+from intermask.motion.kinds import DatasetKind
 
 
-def detect_format(root: Path | str) -> DatasetFormat:
+def detect_format(root: Path | str) -> DatasetKind:
     """``interhuman`` when ``motions_processed/`` exists, ``interx`` when ``motions/*.h5`` or
     ``texts_processed/`` exists; otherwise a ``FileNotFoundError`` naming what was looked for."""
     root = Path(root)

@@ -12,7 +12,7 @@ import json
 import os
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
@@ -26,8 +26,6 @@ PROVENANCE_FILE = "stats.json"
 REFERENCE_MEAN_FILE = "global_mean.npy"
 REFERENCE_STD_FILE = "global_std.npy"
 STATS_FORMAT = "intermask-stats-v1"
-
-DatasetKind = Literal["interhuman", "interx"]
 
 
 class Normalizer:

@@ -8,11 +8,11 @@ from pathlib import Path
 from intermask.data.interhuman import InterHumanDataset, interhuman_stats_sequences
 from intermask.data.interx import InterXDataset, interx_stats_sequences
 from intermask.data.normalization import (
-    DatasetKind,
     Normalizer,
     compute_normalizer,
     default_stats_dir,
 )
+from intermask.motion.kinds import DatasetKind, check_dataset_kind
 
 
 def compute_and_save_stats(
@@ -29,16 +29,14 @@ def compute_and_save_stats(
     both choices of reference person and their mirrored copies. Inter-X: the (56, 6) person
     representation of both persons. Saved to ``out_dir`` (default ``<root>/stats``).
     """
-    if dataset == "interhuman":
+    if check_dataset_kind(dataset) == "interhuman":
         ds = InterHumanDataset(
             root=root, split=split, mode="interaction", mirror=False, swap_persons=False
         )
         sequences, shape = interhuman_stats_sequences(ds), (ds.feature_dim,)
-    elif dataset == "interx":
+    else:
         ds = InterXDataset(root=root, split=split, mode="interaction", swap_persons=False)
         sequences, shape = interx_stats_sequences(ds), ds.feature_shape
-    else:
-        raise ValueError(f"dataset must be 'interhuman' or 'interx', got {dataset!r}")
     normalizer, info = compute_normalizer(sequences, feature_shape=shape, min_std=min_std)
     info.update(
         {

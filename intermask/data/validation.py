@@ -16,7 +16,8 @@ from intermask.data import interhuman as ih
 from intermask.data import interx as ix
 from intermask.data.common import read_id_list, read_interaction_meta
 from intermask.data.errors import DataError, DataProblem, SkippedClip
-from intermask.data.layout import DatasetFormat, detect_format
+from intermask.data.layout import detect_format
+from intermask.motion.kinds import DatasetKind, check_dataset_kind
 
 SPLITS = ("train", "val", "test")
 
@@ -34,12 +35,12 @@ class CheckReport:
         return not self.problems
 
 
-def check_dataset(root: str | Path, format: DatasetFormat | None = None) -> list[DataProblem]:
+def check_dataset(root: str | Path, format: DatasetKind | None = None) -> list[DataProblem]:
     """Every problem found under ``root`` (empty list: the readers will load all splits)."""
     return check_dataset_report(root, format).problems
 
 
-def check_dataset_report(root: str | Path, format: DatasetFormat | None = None) -> CheckReport:
+def check_dataset_report(root: str | Path, format: DatasetKind | None = None) -> CheckReport:
     root = Path(root)
     report = CheckReport()
     if not root.is_dir():
@@ -51,12 +52,10 @@ def check_dataset_report(root: str | Path, format: DatasetFormat | None = None) 
         except FileNotFoundError as err:
             report.problems.append(DataProblem(root, str(err)))
             return report
-    if format == "interhuman":
+    if check_dataset_kind(format, name="format") == "interhuman":
         _check_interhuman(root, report)
-    elif format == "interx":
-        _check_interx(root, report)
     else:
-        raise ValueError(f"format must be 'interhuman' or 'interx', got {format!r}")
+        _check_interx(root, report)
     return report
 
 

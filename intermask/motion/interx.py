@@ -16,6 +16,7 @@ import torch
 from einops import rearrange
 
 from intermask.motion.interhuman import FEATURE_DIM, features_to_positions, zup_to_yup
+from intermask.motion.kinds import DatasetKind, check_dataset_kind
 from intermask.motion.kinematics import forward_kinematics
 from intermask.motion.rotations import axis_angle_to_rot6d, rot6d_to_axis_angle, rot6d_to_matrix
 from intermask.motion.skeleton import NUM_JOINTS, REST_OFFSETS
@@ -30,7 +31,6 @@ RAW_CHANNELS = (
 BODY_ROWS = slice(0, NUM_JOINTS)  # global orient + 21 body joints = the SMPL 22-joint skeleton
 
 UpAxis = Literal["y", "z"]
-Representation = Literal["interhuman", "interx"]
 
 
 def _check_last_dims(x: torch.Tensor, expected: tuple[int, ...], name: str) -> None:
@@ -118,7 +118,7 @@ def interx_joint_positions(
 
 def to_joint_positions(
     motion: torch.Tensor,
-    representation: Representation,
+    representation: DatasetKind,
     offsets: torch.Tensor = REST_OFFSETS,
     up_axis: UpAxis = "z",
 ) -> torch.Tensor:
@@ -127,10 +127,6 @@ def to_joint_positions(
     motion: de-normalized, (..., P, T, 262) for "interhuman" or (..., P, T, 56, 6) for "interx"
     (offsets and up_axis apply to "interx" only).
     """
-    if representation == "interhuman":
+    if check_dataset_kind(representation, name="representation") == "interhuman":
         return interhuman_joint_positions(motion)
-    if representation == "interx":
-        return interx_joint_positions(motion, offsets=offsets, up_axis=up_axis)
-    raise ValueError(
-        f"to_joint_positions: representation must be 'interhuman' or 'interx', got {representation!r}"
-    )
+    return interx_joint_positions(motion, offsets=offsets, up_axis=up_axis)

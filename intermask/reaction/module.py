@@ -15,12 +15,13 @@ from typing import Any, NamedTuple
 import torch
 from torch.optim import Optimizer
 
+from intermask.motion.kinds import DatasetKind
 from intermask.physics import penetration_loss
 from intermask.reaction.flow import SIGMA_MIN, STEPS, check_sigma_min, interpolate
 from intermask.reaction.guidance import Guidance
 from intermask.reaction.losses import InteractionTerms, interaction_loss, reconstruction_loss
 from intermask.reaction.network import ReactionDecoder
-from intermask.reaction.representation import FeatureSpace, Representation
+from intermask.reaction.representation import FeatureSpace
 from intermask.reaction.roles import actor_index, split_roles
 from intermask.reaction.sampler import (
     ReactionParts,
@@ -71,7 +72,7 @@ class ARFlowModule(LossStepsModule):
         self,
         *,
         net: ReactionDecoder,
-        representation: Representation,
+        representation: DatasetKind,
         text: TextFeatureCache | None,
         optimizer: Callable[..., Optimizer],
         sigma_min: float = SIGMA_MIN,

@@ -10,15 +10,14 @@ The statistics are buffers, so a checkpoint carries them.
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 import torch
 from torch import nn
 
 from intermask.motion import interhuman as ih
 from intermask.motion import interx as ix
+from intermask.motion.kinds import DatasetKind, check_dataset_kind
 
-Representation = Literal["interhuman", "interx"]
 FEATURE_SHAPES: dict[str, tuple[int, ...]] = {
     "interhuman": (ih.FEATURE_DIM,),
     "interx": (ix.NUM_ROWS, ix.RAW_CHANNELS),
@@ -32,12 +31,9 @@ class FeatureSpace(nn.Module):
     up_axis: the raw frame of Inter-X translations ("z" for the release); joints are Y-up.
     """
 
-    def __init__(self, *, representation: Representation, up_axis: str = "z") -> None:
+    def __init__(self, *, representation: DatasetKind, up_axis: str = "z") -> None:
         super().__init__()
-        if representation not in FEATURE_SHAPES:
-            raise ValueError(
-                f"representation must be 'interhuman' or 'interx', got {representation!r}"
-            )
+        check_dataset_kind(representation, name="representation")
         self.representation, self.up_axis = representation, up_axis
         self.feature_shape = FEATURE_SHAPES[representation]
         self.register_buffer("mean", torch.zeros(self.feature_shape))

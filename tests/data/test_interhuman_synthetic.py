@@ -59,12 +59,16 @@ def test_synthetic_interx(synthetic_interx_root):
 
 
 def test_two_person_windows_hold_both_single_person_windows(synthetic_interhuman_root):
-    pairs = InterHumanDataset(root=synthetic_interhuman_root, split="val", mode="window", window_persons=2)
+    pairs = InterHumanDataset(
+        root=synthetic_interhuman_root, split="val", mode="window", window_persons=2
+    )
     singles = InterHumanDataset(root=synthetic_interhuman_root, split="val", mode="window")
     assert len(pairs) * 2 == len(singles)
     item = pairs[len(pairs) - 1]
     assert item["motion"].shape == (64, 2, 262) and item["person"] == 0
     sequence, start = int(pairs.windows.sequence[-1]), int(pairs.windows.start[-1])
     for person in (0, 1):
-        match = (singles.windows.sequence == 2 * sequence + person) & (singles.windows.start == start)
+        match = (singles.windows.sequence == 2 * sequence + person) & (
+            singles.windows.start == start
+        )
         assert torch.equal(singles[int(match.nonzero()[0][0])]["motion"], item["motion"][:, person])

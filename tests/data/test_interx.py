@@ -5,9 +5,9 @@ import pickle
 import h5py
 import numpy as np
 import pytest
-from payloads import ExecPayload
 import torch
 from builders import CAPTIONS, write_interx
+from payloads import ExecPayload
 
 from intermask.data.errors import DataError
 from intermask.data.interx import InterXDataset

@@ -186,7 +186,9 @@ def test_splits_follow_the_fractions() -> None:
 
 
 def test_bad_arguments_and_foreign_folders(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="unknown format 'bvh'"):
+    with pytest.raises(
+        ValueError, match=r"format must be one of \('interhuman', 'interx'\), got 'bvh'"
+    ):
         generate_dataset(tmp_path / "a", format="bvh", clips=5, seed=0)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="clips must be between 3"):
         generate_dataset(tmp_path / "a", format="interx", clips=2, seed=0)

@@ -141,7 +141,9 @@ def test_errors() -> None:
         interx_positions(torch.zeros(4, 56, 3))
     with pytest.raises(ValueError, match="up_axis must be 'y' or 'z', got 'x'"):
         interx_positions(torch.zeros(4, 56, 6), up_axis="x")  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="representation must be 'interhuman' or 'interx'"):
+    with pytest.raises(
+        ValueError, match=r"representation must be one of \('interhuman', 'interx'\), got"
+    ):
         to_joint_positions(torch.zeros(1, 2, 4, 262), "amass")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"expected \(\.\.\., P, T, 262\), got \(4, 262\)"):
         interhuman_joint_positions(torch.zeros(4, 262))

@@ -15,7 +15,6 @@ import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 import torch
@@ -28,6 +27,7 @@ from intermask.data.synthetic.writers import (
     InterHumanWriter,
     InterXWriter,
 )
+from intermask.motion.kinds import DatasetKind, check_dataset_kind
 
 __all__ = [
     "ACTIONS",
@@ -159,7 +159,7 @@ def _readme(*, format: str, clips: int, seed: int, split_sizes: dict[str, int]) 
 
 def generate_dataset(
     out: Path | str,
-    format: Literal["interhuman", "interx"],
+    format: DatasetKind,
     clips: int,
     seed: int,
     split_fractions: tuple[float, float, float] = (0.8, 0.1, 0.1),
@@ -170,8 +170,7 @@ def generate_dataset(
     Inter-X clips use the template body for both people: that layout stores rotations and a root
     translation only, so readers rebuild joints with the template offsets.
     """
-    if format not in ("interhuman", "interx"):
-        raise ValueError(f"unknown format {format!r}; expected 'interhuman' or 'interx'")
+    check_dataset_kind(format, name="format")
     if not 3 <= clips <= MAX_CLIPS:
         raise ValueError(f"clips must be between 3 and {MAX_CLIPS}, got {clips}")
     out = Path(out)
