@@ -34,6 +34,7 @@ from intermask.data.synthetic.writers import SPLITS
 from intermask.interm.load import load_generator
 from intermask.interm.sampler import InteractionSampler, joints_from_features
 from intermask.metrics.interaction import interaction_success
+from intermask.motion.masks import length_mask
 from intermask.train import CONFIG_DIR, train
 from intermask.vq.model import FRAMES_PER_STEP
 
@@ -133,7 +134,7 @@ def _clip_errors(
     Inter-M has no person embedding, so "person 1" of a sample may be either clip person, and
     each pair is decoded in its first person's canonical frame: the order and that frame are
     not errors."""
-    valid = torch.arange(real.shape[1])[None, :] < lengths[:, None]  # (B, T)
+    valid = length_mask(lengths, real.shape[1])  # (B, T)
     errors = []
     for order in ([0, 1], [1, 0]):
         aligned = _align_on_ground(generated[:, :, order], real, valid)

@@ -17,6 +17,7 @@ from intermask.interm.sampler import InteractionSampler, joints_from_features
 from intermask.metrics.mpjpe import MPJPE
 from intermask.motion import interhuman as ih
 from intermask.motion import interx as ix
+from intermask.motion.masks import length_mask
 from intermask.physics.volume import DEFAULT_PITCH, DEFAULT_TOLERANCE, intersection_volume
 from intermask.reaction.guidance import Guidance
 from intermask.reaction.roles import actor_index
@@ -130,7 +131,7 @@ class VQReconstruction(MotionSource):
         predicted_joints = joints_from_features(self.vq, decoded)
         real_joints = joints_from_features(self.vq, real)
         if predicted_joints is not None and real_joints is not None:
-            mask = torch.arange(frames, device=lengths.device)[None, :] < lengths[:, None]
+            mask = length_mask(lengths, frames)
             self.mpjpe.update(
                 rearrange(predicted_joints, "b t p j c -> (b p) t j c"),
                 rearrange(real_joints, "b t p j c -> (b p) t j c"),
@@ -256,7 +257,7 @@ class Measured(MotionSource):
     def _measure_penetration(self, motion: torch.Tensor, lengths: torch.Tensor) -> None:
         joints = feature_joints(motion.float())  # (B, 2, T, 22, 3)
         lengths = lengths.to(joints.device)
-        valid = torch.arange(joints.shape[2], device=joints.device)[None, :] < lengths[:, None]
+        valid = length_mask(lengths, joints.shape[2])
         volume = intersection_volume(
             joints[:, 0], joints[:, 1], pitch=self.pitch, frame_mask=valid
         )[valid]

@@ -32,6 +32,7 @@ from intermask.evaluator.vocabulary import (
     Vocabulary,
     load_glove,
 )
+from intermask.motion.masks import length_mask
 from intermask.motion.rotations import rot6d_to_matrix
 
 NUM_ROWS, PERSON_CHANNELS = 56, 6
@@ -233,8 +234,8 @@ class GRUMatcher(nn.Module):
             # ours: first two columns, row by row; pytorch3d: the first two rows
             matrix = rot6d_to_matrix(motion[:, :, :, :TRANSLATION_ROW])  # (B, 2, T, 55, 3, 3)
             motion[:, :, :, :TRANSLATION_ROW] = matrix[..., :2, :].flatten(-2)
-        frames = torch.arange(motion.shape[2], device=motion.device)
-        valid = (frames[None, :] < lengths[:, None])[:, None, :, None, None]  # (B, 1, T, 1, 1)
+        valid = length_mask(lengths.to(motion.device), motion.shape[2])
+        valid = valid[:, None, :, None, None]  # (B, 1, T, 1, 1)
         motion = torch.where(valid, motion, 0.0)
         return rearrange(motion, "b p t j c -> b t (j p c)")
 

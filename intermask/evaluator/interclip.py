@@ -27,6 +27,7 @@ import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 
+from intermask.motion.masks import length_mask
 from intermask.text.clip_encoder import FrozenCLIPTextEncoder, register_model_configs
 from intermask.utils.layers import post_norm_gelu_encoder
 
@@ -91,8 +92,7 @@ class InterCLIPMotionEncoder(nn.Module):
         x = self.embed_motion(frames)  # (B, T, D)
         query = self.query_token.expand(batch, 1, -1).to(x.dtype)
         x = self.sequence_pos_encoder(torch.cat([query, x], dim=1))  # (B, 1 + T, D)
-        positions = torch.arange(frames_count, device=frames.device)
-        padding = positions[None, :] >= lengths[:, None]  # (B, T) True on padded frames
+        padding = ~length_mask(lengths.to(frames.device), frames_count)  # (B, T) True on padding
         padding = torch.cat([padding.new_zeros(batch, 1), padding], dim=1)  # the query is valid
         x = self.transformer(x, src_key_padding_mask=padding)
         return self.out(self.out_ln(x)[:, 0])  # (B, embed_dim)

@@ -32,6 +32,7 @@ from intermask.interm.sampler import (
     joints_from_features,
 )
 from intermask.interm.token_cache import TokenCache, crop_keys
+from intermask.motion.masks import length_mask
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
 from intermask.utils.distributed import gather_rows, global_mean_scale, local_rows
@@ -83,8 +84,7 @@ def global_masked_cross_entropy(
 def _layout_of(lengths_in_steps: torch.Tensor, grid: torch.Size) -> torch.Tensor:
     """(B,) lengths and (rows, T') -> (B, 2, rows, T') int64: 0 inside each length, -1 after (the
     padding of :meth:`InterMModule.tokenize`), what the masks depend on."""
-    steps = torch.arange(grid[-1], device=lengths_in_steps.device)
-    inside = steps[None, :] < lengths_in_steps[:, None]  # (B, T')
+    inside = length_mask(lengths_in_steps, grid[-1])  # (B, T')
     codes = torch.where(inside, 0, -1)
     return codes[:, None, None, :].expand(-1, 2, *grid[:-1], -1).clone()
 

@@ -15,6 +15,8 @@ from typing import NamedTuple
 import torch
 from einops import rearrange
 
+from intermask.motion.masks import length_mask
+
 CODEBOOK_SIZE = 1024  # |C|, paper appendix C.1
 
 
@@ -56,7 +58,7 @@ def step_padding_mask(lengths_in_steps: torch.Tensor, steps: int) -> torch.Tenso
         raise ValueError(
             f"lengths_in_steps must lie in [0, {steps}], got {lengths_in_steps.tolist()}"
         )
-    return torch.arange(steps, device=lengths_in_steps.device) >= lengths_in_steps[:, None]
+    return ~length_mask(lengths_in_steps, steps)
 
 
 def build_sequence(

@@ -7,13 +7,10 @@ from __future__ import annotations
 import torch
 
 from intermask.motion.kinematics import bone_lengths
+from intermask.motion.masks import length_mask
 from intermask.motion.skeleton import FOOT_JOINTS
 
 UP_AXIS = 1  # joints are Y-up throughout the package
-
-
-def _frame_mask(lengths: torch.Tensor, frames: int) -> torch.Tensor:
-    return torch.arange(frames, device=lengths.device)[None, :] < lengths[:, None]  # (B, T)
 
 
 def _masked_mean(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -39,7 +36,7 @@ def interaction_statistics(
         raise ValueError(f"every clip needs at least 2 frames, got lengths {lengths.tolist()}")
     joints = joints.float()
     frames = joints.shape[1]
-    mask = _frame_mask(lengths.to(joints.device), frames)
+    mask = length_mask(lengths.to(joints.device), frames)
     step_mask = mask[:, 1:] & mask[:, :-1]
     speed = torch.linalg.vector_norm(joints[:, 1:] - joints[:, :-1], dim=-1) * fps
     horizontal = joints[:, :, :, 0, :].clone()

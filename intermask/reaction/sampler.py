@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 import torch
 from einops import rearrange
 
+from intermask.motion.masks import length_mask
 from intermask.reaction.flow import STEPS, check_sigma_min, euler_step, time_grid
 from intermask.reaction.guidance import (
     Guidance,
@@ -56,7 +57,7 @@ def frame_mask_from_lengths(lengths: torch.Tensor, frames: int) -> torch.Tensor:
     lengths = lengths.long()
     if lengths.ndim != 1 or bool((lengths < 1).any()) or bool((lengths > frames).any()):
         raise ValueError(f"lengths must be (B,) frames in [1, {frames}], got {lengths.tolist()}")
-    return torch.arange(frames, device=lengths.device)[None, :] < lengths[:, None]
+    return length_mask(lengths, frames)
 
 
 def _noise(seeds: Sequence[int], step: int, shape: tuple[int, ...], device) -> torch.Tensor:

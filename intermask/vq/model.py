@@ -7,6 +7,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
+from intermask.motion.masks import length_mask
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.quantizers import ResidualQuantizer
 from intermask.vq.views import TwoPersonView
@@ -91,10 +92,8 @@ class MotionVQVAE(nn.Module):
         self._check_frames(features.shape[1])
         indices = self.quantizer.encode(self.encoder(self.view.to_joints(features)))
         if lengths is not None:
-            steps = torch.arange(indices.shape[-1], device=indices.device)
-            padding = (
-                steps[None, :] >= (lengths.to(indices.device) // FRAMES_PER_STEP)[:, None]
-            )  # (B, T/4)
+            steps = lengths.to(indices.device) // FRAMES_PER_STEP
+            padding = ~length_mask(steps, indices.shape[-1])  # (B, T/4)
             indices = indices.masked_fill(padding[:, None, None, :], -1)
         return indices
 
