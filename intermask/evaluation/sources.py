@@ -15,7 +15,6 @@ from intermask.data.normalization import Normalizer
 from intermask.evaluation.protocol import Batch, MotionSource
 from intermask.interm.sampler import InteractionSampler, joints_from_features
 from intermask.metrics.mpjpe import MPJPE
-from intermask.motion import interhuman as ih
 from intermask.motion import interx as ix
 from intermask.motion.masks import length_mask
 from intermask.physics.volume import DEFAULT_PITCH, DEFAULT_TOLERANCE, intersection_volume
@@ -190,14 +189,7 @@ class ARFlowReaction(MotionSource):
 def feature_joints(features: torch.Tensor) -> torch.Tensor:
     """(..., T, *F) de-normalized InterHuman (262) or Inter-X (56, 6) features -> (..., T, 22, 3)
     joint positions in metres (Inter-X through the template skeleton, Z-up raw frame)."""
-    if features.shape[-1] == ih.FEATURE_DIM:
-        return ih.features_to_positions(features)
-    if tuple(features.shape[-2:]) == (ix.NUM_ROWS, ix.RAW_CHANNELS):
-        return ix.interx_positions(features, up_axis="z")
-    raise ValueError(
-        f"no joint positions for features of shape {tuple(features.shape)}: expected (..., T, "
-        f"{ih.FEATURE_DIM}) InterHuman or (..., T, {ix.NUM_ROWS}, {ix.RAW_CHANNELS}) Inter-X"
-    )
+    return ix.person_joint_positions(features)
 
 
 def motion_joints(motion: torch.Tensor) -> torch.Tensor | None:

@@ -100,7 +100,8 @@ def interhuman_joint_positions(features: torch.Tensor) -> torch.Tensor:
         raise ValueError(
             f"interhuman_joint_positions: expected (..., P, T, 262), got {tuple(features.shape)}"
         )
-    return rearrange(features_to_positions(features), "... p t j c -> ... t p j c")
+    positions = person_joint_positions(features, "interhuman")
+    return rearrange(positions, "... p t j c -> ... t p j c")
 
 
 def interx_joint_positions(
@@ -112,8 +113,39 @@ def interx_joint_positions(
         raise ValueError(
             f"interx_joint_positions: expected (..., P, T, 56, 6), got {tuple(representation.shape)}"
         )
-    positions = interx_positions(representation, offsets=offsets, up_axis=up_axis)
+    positions = person_joint_positions(representation, "interx", offsets=offsets, up_axis=up_axis)
     return rearrange(positions, "... p t j c -> ... t p j c")
+
+
+def representation_of(features: torch.Tensor) -> DatasetKind:
+    """The kind of de-normalized features by their trailing shape: (..., 262) InterHuman or
+    (..., 56, 6) Inter-X."""
+    if features.shape[-1] == FEATURE_DIM:
+        return "interhuman"
+    if tuple(features.shape[-2:]) == (NUM_ROWS, RAW_CHANNELS):
+        return "interx"
+    raise ValueError(
+        f"no joint positions for features of shape {tuple(features.shape)}: expected (..., T, "
+        f"{FEATURE_DIM}) InterHuman or (..., T, {NUM_ROWS}, {RAW_CHANNELS}) Inter-X"
+    )
+
+
+def person_joint_positions(
+    features: torch.Tensor,
+    representation: DatasetKind | None = None,
+    *,
+    offsets: torch.Tensor = REST_OFFSETS,
+    up_axis: UpAxis = "z",
+) -> torch.Tensor:
+    """(..., T, *F) de-normalized features -> (..., T, 22, 3) joint positions in metres, Y-up:
+    the one place features become joints. ``representation`` None reads it from the shape;
+    Inter-X goes through the skeleton ``offsets`` (template by default) from its raw
+    ``up_axis`` frame."""
+    if representation is None:
+        representation = representation_of(features)
+    if check_dataset_kind(representation, name="representation") == "interhuman":
+        return features_to_positions(features)
+    return interx_positions(features, offsets=offsets, up_axis=up_axis)
 
 
 def to_joint_positions(

@@ -81,6 +81,4 @@ class FeatureSpace(nn.Module):
 
     def feature_joints(self, features: torch.Tensor) -> torch.Tensor:
         """(..., T, *F) de-normalized features -> (..., T, 22, 3) joint positions."""
-        if self.representation == "interhuman":
-            return ih.features_to_positions(features)
-        return ix.interx_positions(features, up_axis=self.up_axis)
+        return ix.person_joint_positions(features, self.representation, up_axis=self.up_axis)

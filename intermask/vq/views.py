@@ -131,7 +131,9 @@ class InterXView(nn.Module):
         rot6d = features[..., : ix.NUM_ROTATION_ROWS, :]
         if not self.has_positions:
             return Geometry(None, rot6d, None)
-        positions = ix.interx_positions(features, offsets=self.body_offsets, up_axis=self.up_axis)
+        positions = ix.person_joint_positions(
+            features, "interx", offsets=self.body_offsets, up_axis=self.up_axis
+        )
         contacts = ih.foot_contacts(positions)
         contacts = torch.cat(
             (contacts, contacts[..., -1:, :]), dim=-2
