@@ -15,6 +15,7 @@ from intermask.data.normalization import Normalizer
 from intermask.evaluation.protocol import Batch, MotionSource
 from intermask.interm.sampler import InteractionSampler, joints_from_features
 from intermask.metrics.mpjpe import MPJPE
+from intermask.metrics.penetration import IntersectionFrequency, IntersectionVolume
 from intermask.motion import interx as ix
 from intermask.motion.masks import length_mask
 from intermask.physics.volume import DEFAULT_PITCH, DEFAULT_TOLERANCE, intersection_volume
@@ -222,7 +223,8 @@ class Measured(MotionSource):
         tolerance: float = DEFAULT_TOLERANCE,
     ) -> None:
         self.source, self.penetration, self.latency = source, penetration, latency
-        self.pitch, self.tolerance = pitch, tolerance
+        self.volume = IntersectionVolume(pitch=pitch)
+        self.frequency = IntersectionFrequency(pitch=pitch, tolerance=tolerance)
         self.name, self.generates = source.name, source.generates
         self.knows_roles = source.knows_roles
         self.reset()
@@ -230,7 +232,8 @@ class Measured(MotionSource):
     def reset(self) -> None:
         self.source.reset()
         self._measuring = True
-        self._volume = self._hits = self._frames = 0.0
+        self.volume.reset()
+        self.frequency.reset()
         self._seconds, self._samples = 0.0, 0
 
     def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -251,18 +254,17 @@ class Measured(MotionSource):
         lengths = lengths.to(joints.device)
         valid = length_mask(lengths, joints.shape[2])
         volume = intersection_volume(
-            joints[:, 0], joints[:, 1], pitch=self.pitch, frame_mask=valid
+            joints[:, 0], joints[:, 1], pitch=self.volume.pitch, frame_mask=valid
         )[valid]
-        self._volume += float(volume.double().sum())
-        self._hits += float((volume > self.tolerance).sum())
-        self._frames += float(volume.numel())
+        self.volume.update(volumes=volume)  # computed once, counted by both metrics
+        self.frequency.update(volumes=volume)
 
     def extra_metrics(self) -> dict[str, float]:
         self._measuring = False
         values = dict(self.source.extra_metrics())
-        if self.penetration and self._frames:
-            values["iv_cm3"] = self._volume / self._frames
-            values["if"] = self._hits / self._frames
+        if self.penetration and self.volume.frames > 0:
+            values["iv_cm3"] = float(self.volume.compute())
+            values["if"] = float(self.frequency.compute())
         if self.latency and self._samples:
             values["latency_ms"] = 1000.0 * self._seconds / self._samples
         return values

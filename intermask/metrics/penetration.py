@@ -64,6 +64,28 @@ class _PenetrationMetric(Metric):
         )
         return volume if frame_mask is None else volume[frame_mask]
 
+    def _accumulate(self, volume: torch.Tensor) -> None:
+        raise NotImplementedError
+
+    def update(
+        self,
+        joints_a: torch.Tensor | None = None,
+        joints_b: torch.Tensor | None = None,
+        frame_mask: torch.Tensor | None = None,
+        *,
+        volumes: torch.Tensor | None = None,
+    ) -> None:
+        """The two persons' joints (and valid frames), or ``volumes``: the (V,) intersection
+        volumes in cm^3 of V valid frames computed elsewhere (the evaluation rows compute them
+        once for both metrics)."""
+        if volumes is None:
+            if joints_a is None or joints_b is None:
+                raise ValueError(
+                    f"{type(self).__name__}.update: give joints_a and joints_b, or volumes"
+                )
+            volumes = self._volumes(joints_a, joints_b, frame_mask)
+        self._accumulate(volumes)
+
     def _mean(self) -> torch.Tensor:
         if self.frames == 0:
             raise ValueError(f"{type(self).__name__}.compute() called before any valid frame")
@@ -77,14 +99,8 @@ class IntersectionVolume(_PenetrationMetric):
     joints in metres.
     """
 
-    def update(
-        self,
-        joints_a: torch.Tensor,
-        joints_b: torch.Tensor,
-        frame_mask: torch.Tensor | None = None,
-    ) -> None:
-        volume = self._volumes(joints_a, joints_b, frame_mask)
-        self.total += volume.double().sum()
+    def _accumulate(self, volume: torch.Tensor) -> None:
+        self.total += volume.double().sum().to(self.total.device)
         self.frames += volume.numel()
 
     def compute(self) -> torch.Tensor:
@@ -110,14 +126,9 @@ class IntersectionFrequency(_PenetrationMetric):
             raise ValueError(f"IntersectionFrequency: tolerance must be >= 0 cm^3, got {tolerance}")
         self.tolerance = tolerance
 
-    def update(
-        self,
-        joints_a: torch.Tensor,
-        joints_b: torch.Tensor,
-        frame_mask: torch.Tensor | None = None,
-    ) -> None:
-        volume = self._volumes(joints_a, joints_b, frame_mask)
-        self.total += penetrating_frames(volume, tolerance=self.tolerance).double().sum()
+    def _accumulate(self, volume: torch.Tensor) -> None:
+        hits = penetrating_frames(volume, tolerance=self.tolerance).double().sum()
+        self.total += hits.to(self.total.device)
         self.frames += volume.numel()
 
     def compute(self) -> torch.Tensor:

@@ -7,6 +7,7 @@ import torch
 
 from intermask.evaluation.protocol import MotionSource
 from intermask.evaluation.sources import Measured, feature_joints
+from intermask.metrics.penetration import IntersectionFrequency, IntersectionVolume
 from intermask.motion.skeleton import rest_pose_positions
 
 
@@ -54,6 +55,22 @@ def test_overlapping_bodies_give_volume_and_frequency_only_on_valid_frames():
     assert values["if"] == 1.0 and values["iv_cm3"] > 1000.0  # two torsos 30 cm apart
     assert values["latency_ms"] > 0.0
     assert row.name == "fixed" and row.generates
+
+
+def test_the_row_reports_what_the_penetration_metrics_compute_on_the_same_batch():
+    motion = standing_pair(batch=3, frames=5, gap=0.3)
+    motion[1] = standing_pair(batch=1, frames=5, gap=2.0)[0]  # the second pair apart
+    lengths = torch.tensor([5, 3, 4])
+    row = Measured(FixedPair(motion, lengths), tolerance=2000.0)
+    row(None, torch.zeros(3))
+    values = row.extra_metrics()
+    joints = feature_joints(motion)
+    valid = torch.arange(5)[None, :] < lengths[:, None]
+    volume, frequency = IntersectionVolume(), IntersectionFrequency(tolerance=2000.0)
+    volume.update(joints[:, 0], joints[:, 1], valid)
+    frequency.update(joints[:, 0], joints[:, 1], valid)
+    assert values["iv_cm3"] == float(volume.compute()) > 0.0
+    assert values["if"] == float(frequency.compute()) == pytest.approx(9 / 12)  # 5 + 0 + 4 frames
 
 
 def test_distant_bodies_give_zero_and_measurement_covers_the_evaluation_pass_only():

@@ -84,3 +84,13 @@ def test_errors():
     empty.update(a, b, torch.zeros(3, 4, dtype=torch.bool))
     with pytest.raises(ValueError, match="before any valid frame"):
         empty.compute()
+
+
+def test_precomputed_volumes_are_counted_and_an_empty_update_is_refused():
+    volumes = torch.tensor([0.0, 5.0, 12.0, 0.5])
+    volume, frequency = IntersectionVolume(), IntersectionFrequency(tolerance=1.0)
+    volume.update(volumes=volumes)
+    frequency.update(volumes=volumes)
+    assert float(volume.compute()) == pytest.approx(17.5 / 4) and float(frequency.compute()) == 0.5
+    with pytest.raises(ValueError, match="IntersectionVolume.update: give joints_a and joints_b"):
+        IntersectionVolume().update()
