@@ -20,9 +20,9 @@ from intermask.train import CONFIG_DIR
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_a_two_job_sweep_runs_through_the_local_executor(synthetic_interhuman_root, tmp_path):
-    sweep = tmp_path / "sweep"
-    command = [
+def _local_sweep(sweep: Path, data_root: Path, *overrides: str) -> list[str]:
+    """A tiny train_vq multirun through submitit's local executor into ``sweep``."""
+    return [
         sys.executable,
         "-m",
         "intermask.train",
@@ -32,18 +32,27 @@ def test_a_two_job_sweep_runs_through_the_local_executor(synthetic_interhuman_ro
         "hydra/launcher=submitit_local",
         "hydra.launcher.timeout_min=10",
         f"hydra.sweep.dir={sweep}",
-        f"data.root={synthetic_interhuman_root}",
+        f"data.root={data_root}",
         "data.batch_size=16",
         "data.num_workers=0",
         "model.net.encoder.width=16",
-        "model.net.quantizer.codebook_size=16,32",  # the swept value: two jobs
         "trainer=cpu",
-        "trainer.max_epochs=1",
-        "trainer.limit_train_batches=2",
         "trainer.limit_val_batches=1",
         "callbacks.rich_progress_bar=null",
         "callbacks.sample_animations=null",
+        *overrides,
     ]
+
+
+def test_a_two_job_sweep_runs_through_the_local_executor(synthetic_interhuman_root, tmp_path):
+    sweep = tmp_path / "sweep"
+    command = _local_sweep(
+        sweep,
+        synthetic_interhuman_root,
+        "model.net.quantizer.codebook_size=16,32",  # the swept value: two jobs
+        "trainer.max_epochs=1",
+        "trainer.limit_train_batches=2",
+    )
     environment = {**os.environ, "OMP_NUM_THREADS": "1"}
     done = subprocess.run(command, cwd=ROOT, env=environment, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
@@ -131,30 +140,15 @@ def test_a_preempted_job_is_requeued_and_resumes_its_checkpoint(
     synthetic_interhuman_root, tmp_path
 ):
     sweep = tmp_path / "sweep"
-    command = [
-        sys.executable,
-        "-m",
-        "intermask.train",
-        "--config-name",
-        "train_vq",
-        "--multirun",
-        "hydra/launcher=submitit_local",
-        "hydra.launcher.timeout_min=10",
-        f"hydra.sweep.dir={sweep}",
-        f"data.root={synthetic_interhuman_root}",
-        "data.batch_size=16",
-        "data.num_workers=0",
-        "model.net.encoder.width=16",
+    command = _local_sweep(
+        sweep,
+        synthetic_interhuman_root,
         "model.net.quantizer.codebook_size=16",
-        "trainer=cpu",
         "trainer.max_epochs=2",
         "trainer.limit_train_batches=3",
-        "trainer.limit_val_batches=1",
-        "callbacks.rich_progress_bar=null",
-        "callbacks.sample_animations=null",
         "+callbacks.preempt._target_=test_cluster.PreemptOnce",
         f"+callbacks.preempt.marker={sweep / '0' / 'preempted'}",
-    ]
+    )
     environment = {
         **os.environ,
         "OMP_NUM_THREADS": "1",

@@ -47,11 +47,16 @@ TINY_NET = {
 }
 
 
-def _compose(experiment: str):
+def _compose(experiment: str, *extra: str):
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         return compose(
             "train_gen",
-            overrides=[f"experiment={experiment}", "vq_ckpt=unused", "paths.output_dir=/tmp/x"],
+            overrides=[
+                f"experiment={experiment}",
+                "vq_ckpt=unused",
+                "paths.output_dir=/tmp/x",
+                *extra,
+            ],
         )
 
 
@@ -61,16 +66,7 @@ def test_every_gen_experiment_file_is_covered():
 
 
 def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose(
-            "train_gen",
-            overrides=[
-                "experiment=gen_synthetic_long",
-                "vq_ckpt=unused",
-                "callbacks.protocol.evaluator=unused.ckpt",
-                "paths.output_dir=/tmp/x",
-            ],
-        )
+    cfg = _compose("gen_synthetic_long", "callbacks.protocol.evaluator=unused.ckpt")
     landed = {key: cfg.model[key] if key in cfg.model else cfg.model.net[key] for key in PAPER}
     assert landed == PAPER
     net = cfg.model.net
@@ -82,16 +78,7 @@ def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
 
 
 def test_long_cpu_run_is_the_demo_network_trained_longer_and_scored_every_1000_steps():
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose(
-            "train_gen",
-            overrides=[
-                "experiment=gen_synthetic_long_cpu",
-                "vq_ckpt=unused",
-                "callbacks.protocol.evaluator=unused.ckpt",
-                "paths.output_dir=/tmp/x",
-            ],
-        )
+    cfg = _compose("gen_synthetic_long_cpu", "callbacks.protocol.evaluator=unused.ckpt")
     demo = _compose("gen_demo")
     assert cfg.model.net == demo.model.net and cfg.data.batch_size == demo.data.batch_size
     assert cfg.trainer.accelerator == "cpu" and cfg.trainer.max_epochs == 100

@@ -7,13 +7,12 @@ within-batch distance matrix must group the same samples as the single-process r
 
 from __future__ import annotations
 
-import socket
+import functools
 from pathlib import Path
 
 import pytest
 import torch
-import torch.distributed as dist
-import torch.multiprocessing as mp
+from gloo import run_on_processes
 from torch.utils.data import DistributedSampler
 
 from intermask.metrics import FID, Diversity, MMDist, MultiModality, RPrecision
@@ -61,34 +60,16 @@ def _run_metrics(rank: int, world: int) -> dict[str, torch.Tensor]:
     return {name: metric.compute() for name, metric in metrics.items()}
 
 
-def _worker(rank: int, world: int, port: int, out_dir: str) -> None:
-    torch.set_num_threads(1)  # a forked child must not reuse the parent's OpenMP pool
-    dist.init_process_group(
-        "gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank, world_size=world
-    )
-    try:
-        torch.save(_run_metrics(rank, world), Path(out_dir) / f"rank{rank}.pt")
-    finally:
-        dist.destroy_process_group()
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+def _save_metrics(rank: int, world: int, *, out_dir: str) -> None:
+    torch.save(_run_metrics(rank, world), Path(out_dir) / f"rank{rank}.pt")
 
 
 def _assert_ddp_matches_single_process(tmp_path: Path, *, start_method: str) -> None:
     single = _run_metrics(0, 1)
     shards = [_shard(SAMPLES, rank=r, world=2) for r in range(2)]
     assert len(sum(shards, [])) > SAMPLES  # the split really has padded duplicates
-    mp.start_processes(
-        _worker,
-        args=(2, _free_port(), str(tmp_path)),
-        nprocs=2,
-        join=True,
-        start_method=start_method,
-    )
+    work = functools.partial(_save_metrics, out_dir=str(tmp_path))
+    run_on_processes(work, world=2, start_method=start_method)
     for rank in range(2):
         gathered = torch.load(tmp_path / f"rank{rank}.pt", weights_only=True)
         assert gathered.keys() == single.keys()

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import socket
+import functools
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 import torch
 import torch.distributed as dist
-import torch.multiprocessing as mp
+from gloo import run_on_processes
 
 from callbacks.random_state import RandomStateCheckpoint
 from intermask.interm.module import global_masked_cross_entropy, masked_cross_entropy
@@ -37,43 +37,28 @@ def _weight_gradient(loss_fn, features, weight, targets, mask) -> torch.Tensor:
     return weight.grad
 
 
-def _worker(rank: int, world: int, port: int, out_dir: str) -> None:
-    torch.set_num_threads(1)
-    dist.init_process_group(
-        "gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank, world_size=world
+def _worker(rank: int, world: int, *, out_dir: str) -> None:
+    features, weight, targets, mask = _global_batch()
+    mine = local_rows(ROWS)
+    grad = _weight_gradient(
+        global_masked_cross_entropy, features[mine], weight, targets[mine], mask[mine]
     )
+    dist.all_reduce(grad)  # what DDP does to a parameter's gradient: the ranks' sum ...
+    grad /= world  # ... over the world size
+    rows = gather_rows(torch.arange(ROWS) + 10 * rank)
+    uneven = None
     try:
-        features, weight, targets, mask = _global_batch()
-        mine = local_rows(ROWS)
-        grad = _weight_gradient(
-            global_masked_cross_entropy, features[mine], weight, targets[mine], mask[mine]
-        )
-        dist.all_reduce(grad)  # what DDP does to a parameter's gradient: the ranks' sum ...
-        grad /= world  # ... over the world size
-        rows = gather_rows(torch.arange(ROWS) + 10 * rank)
-        uneven = None
-        try:
-            gather_rows(torch.zeros(ROWS + rank))
-        except RuntimeError as error:
-            uneven = str(error)
-        torch.save(
-            {"grad": grad, "rows": rows, "group": process_group(), "uneven": uneven},
-            Path(out_dir) / f"rank{rank}.pt",
-        )
-    finally:
-        dist.destroy_process_group()
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+        gather_rows(torch.zeros(ROWS + rank))
+    except RuntimeError as error:
+        uneven = str(error)
+    torch.save(
+        {"grad": grad, "rows": rows, "group": process_group(), "uneven": uneven},
+        Path(out_dir) / f"rank{rank}.pt",
+    )
 
 
 def test_two_ranks_take_the_one_process_gradient_of_a_masked_mean(tmp_path):
-    mp.start_processes(
-        _worker, args=(2, _free_port(), str(tmp_path)), nprocs=2, join=True, start_method="fork"
-    )
+    run_on_processes(functools.partial(_worker, out_dir=str(tmp_path)), world=2)
     features, weight, targets, mask = _global_batch()
     assert mask[:ROWS].sum() > mask[ROWS:].sum()  # the ranks' means would weigh tokens unequally
     one_process = _weight_gradient(masked_cross_entropy, features, weight, targets, mask)
