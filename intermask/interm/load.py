@@ -7,12 +7,11 @@ from pathlib import Path
 from typing import NamedTuple
 
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from intermask.interm.model import InterMTransformer
 from intermask.text.cache import TextFeatureCache
-from intermask.utils.checkpoint_files import read_checkpoint_file
-from intermask.utils.files import resolve_checkpoint, run_config_path
+from intermask.utils.files import open_run_checkpoint
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.run_config import check_targets
 from intermask.vq.load import load_vq
@@ -69,9 +68,8 @@ def load_generator(
     """checkpoint: ``<run>/checkpoints/<name>.ckpt`` of a train_gen run, or the run directory
     (its last.ckpt). The transformer is rebuilt from ``<run>/config.yaml`` and loaded strictly;
     the VQ-VAE comes from the run's ``vq_ckpt`` unless ``vq_checkpoint`` overrides it."""
-    checkpoint = resolve_checkpoint(checkpoint, kind="generator")
-    config_path = run_config_path(checkpoint, kind="generator")
-    config = OmegaConf.load(config_path)
+    run = open_run_checkpoint(checkpoint, kind="generator", map_location=map_location)
+    config, config_path = run.config, run.config_path
     if "vq_ckpt" not in config or "net" not in config.get("model", {}):
         raise ValueError(f"{config_path}: not a train_gen run config (no vq_ckpt / model.net)")
     # both sections are checked before anything is built or read
@@ -84,16 +82,15 @@ def load_generator(
             "vq_checkpoint= to point to it"
         )
     net = instantiate(net_config)
-    stored = read_checkpoint_file(checkpoint, map_location=map_location)
-    net.load_state_dict({k.removeprefix("net."): v for k, v in stored["state_dict"].items()})
+    net.load_state_dict(run.weights("net."))
     vq = load_vq(vq_path, map_location=map_location)
-    check_vq_matches(net, vq, stored.get("hyper_parameters", {}), checkpoint, vq_path)
+    check_vq_matches(net, vq, run.stored.get("hyper_parameters", {}), run.checkpoint, vq_path)
     text = instantiate(text_config)
     return LoadedGenerator(
         net.eval().requires_grad_(False),
         vq,
         text,
-        checkpoint,
+        run.checkpoint,
         vq_path,
         config,
     )

@@ -1,9 +1,17 @@
-"""Identifying files: every result names the checkpoints that produced it by content hash."""
+"""Identifying files: every result names the checkpoints that produced it by content hash, and
+every loader reaches a run's config and weights through :func:`open_run_checkpoint`."""
 
 from __future__ import annotations
 
 import hashlib
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from intermask.utils.checkpoint_files import read_checkpoint_file
 
 HASH_CHARS = 16
 
@@ -34,6 +42,35 @@ def resolve_checkpoint(path: str | Path, *, kind: str) -> Path:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: {kind} checkpoint not found")
     return path
+
+
+@dataclass(frozen=True)
+class RunCheckpoint:
+    """A checkpoint of a training run with the run's resolved config beside it; the weights are
+    read (``weights_only``) on first use, so a loader checks the config before touching them."""
+
+    checkpoint: Path  # <run>/checkpoints/<name>.ckpt
+    config_path: Path  # <run>/config.yaml
+    config: DictConfig
+    map_location: str = "cpu"
+
+    @cached_property
+    def stored(self) -> dict[str, Any]:
+        return read_checkpoint_file(self.checkpoint, map_location=self.map_location)
+
+    def weights(self, prefix: str = "") -> dict[str, Any]:
+        """The state dict entries under ``prefix``, with the prefix removed."""
+        state = self.stored["state_dict"]
+        return {k.removeprefix(prefix): v for k, v in state.items() if k.startswith(prefix)}
+
+
+def open_run_checkpoint(path: str | Path, *, kind: str, map_location: str = "cpu") -> RunCheckpoint:
+    """A checkpoint file or a run directory (its last.ckpt) -> :class:`RunCheckpoint`: the one
+    path every loader (VQ, generator, ARFlow) takes to a run's config and weights. Errors name
+    ``kind`` and the file."""
+    checkpoint = resolve_checkpoint(path, kind=kind)
+    config_path = run_config_path(checkpoint, kind=kind)
+    return RunCheckpoint(checkpoint, config_path, OmegaConf.load(config_path), map_location)
 
 
 def run_config_path(checkpoint: Path, *, kind: str) -> Path:
