@@ -181,12 +181,13 @@ def _generate(args: argparse.Namespace) -> int:
     generator.text.encoder.to(device)
     kind = gen.dataset_kind(generator)
     fps = args.fps or defaults["fps"]
-    mode_iterations = defaults["reaction_iterations"] if args.reaction else defaults["iterations"]
+    sampler = defaults["sampler"]
+    mode_iterations = defaults["reaction_iterations"] if args.reaction else sampler["iterations"]
     settings = gen.Settings(
         iterations=args.iterations or mode_iterations,
-        cfg_scale=defaults["cfg_scale"] if args.cfg_scale is None else args.cfg_scale,
-        top_k_ratio=args.top_k or defaults["top_k_ratio"],
-        temperature=defaults["temperature"] if args.temperature is None else args.temperature,
+        cfg_scale=sampler["cfg_scale"] if args.cfg_scale is None else args.cfg_scale,
+        top_k_ratio=args.top_k or sampler["top_k_ratio"],
+        temperature=sampler["temperature"] if args.temperature is None else args.temperature,
         batch_size=args.batch_size or defaults["batch_size"],
         fps=fps,
     )
@@ -240,7 +241,7 @@ def _add_generate_parser(commands) -> None:
     parser = commands.add_parser(
         "generate",
         help="captions -> two-person interactions (npy, JSON, GIF, MP4, HTML)",
-        description="Defaults come from configs/generate.yaml.",
+        description="Defaults come from configs/generate.yaml and configs/sampler/paper.yaml.",
     )
     parser.add_argument("--checkpoint", required=True, help="train_gen run directory or .ckpt")
     parser.add_argument("--vq-checkpoint", help="override the run's VQ checkpoint path")

@@ -18,27 +18,27 @@ from typing import Any
 
 import numpy as np
 import torch
+from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from intermask.config_files import config_dir
-from intermask.interm.decoding import Edit
+from intermask.interm.decoding import CFG_SCALE, ITERATIONS, TEMPERATURE, TOP_K_RATIO, Edit
 from intermask.interm.load import LoadedGenerator
 from intermask.interm.sampler import InteractionSampler
 from intermask.utils.files import file_hash
 from intermask.vq.model import FRAMES_PER_STEP
 
-CONFIG_PATH = config_dir() / "generate.yaml"
 MAX_FRAMES = {"interhuman": 300, "interx": 148}  # longest training clips (multiples of 4)
 
 
 @dataclass(frozen=True)
 class Settings:
-    """Decoding settings of one generation job (paper defaults in configs/generate.yaml)."""
+    """Decoding settings of one generation job (paper defaults in configs/sampler/paper.yaml)."""
 
-    iterations: int = 20
-    cfg_scale: float = 2.0
-    top_k_ratio: float = 0.1
-    temperature: float = 1.0
+    iterations: int = ITERATIONS
+    cfg_scale: float = CFG_SCALE
+    top_k_ratio: float = TOP_K_RATIO
+    temperature: float = TEMPERATURE
     batch_size: int = 32
     fps: float = 30.0
 
@@ -54,7 +54,9 @@ class Sample:
 
 
 def default_settings() -> dict[str, Any]:
-    return OmegaConf.to_container(OmegaConf.load(CONFIG_PATH), resolve=True)
+    """configs/generate.yaml composed with its sampler group (``["sampler"]["iterations"]``...)."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return OmegaConf.to_container(compose("generate"), resolve=True)
 
 
 def dataset_kind(generator: LoadedGenerator) -> str:

@@ -35,6 +35,7 @@ from intermask.interm.tokens import step_padding_mask
 ITERATIONS = 20  # I, interaction generation (section 3.3); reaction: 12 (paper), 10 (reference)
 CFG_SCALE = 2.0  # s, classifier-free guidance scale (appendix C.1)
 TOP_K_RATIO = 0.1  # keep the ceil(0.1 * K) largest logits (reference topk_filter_thres=0.9)
+TEMPERATURE = 1.0  # sampling temperature of the kept logits
 
 
 class Edit(NamedTuple):
@@ -302,7 +303,7 @@ def generate(
     iterations: int = ITERATIONS,
     cfg_scale: float = CFG_SCALE,
     top_k_ratio: float = TOP_K_RATIO,
-    temperature: float = 1.0,
+    temperature: float = TEMPERATURE,
     seeds: torch.Tensor | Sequence[int] | None = None,
     reference_tokens: torch.Tensor | None = None,
     edit: Edit | None = None,

@@ -12,7 +12,14 @@ from typing import NamedTuple
 import torch
 from einops import rearrange
 
-from intermask.interm.decoding import CFG_SCALE, ITERATIONS, TOP_K_RATIO, Edit, generate
+from intermask.interm.decoding import (
+    CFG_SCALE,
+    ITERATIONS,
+    TEMPERATURE,
+    TOP_K_RATIO,
+    Edit,
+    generate,
+)
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.text.cache import TextFeatureCache
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
@@ -63,7 +70,7 @@ class InteractionSampler:
         iterations: int = ITERATIONS,
         cfg_scale: float = CFG_SCALE,
         top_k_ratio: float = TOP_K_RATIO,
-        temperature: float = 1.0,
+        temperature: float = TEMPERATURE,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
         self.iterations, self.cfg_scale = iterations, cfg_scale
