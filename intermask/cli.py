@@ -154,86 +154,10 @@ def _output_folder(text: str) -> Path:
 
 
 def _generate(args: argparse.Namespace) -> int:
-    import torch
-
     from intermask import generate as gen
-    from intermask.interm.load import load_generator
-    from intermask.vq.model import FRAMES_PER_STEP
 
-    defaults = gen.default_settings()
-    if bool(args.text) == bool(args.prompts) and not args.reaction:
-        raise ValueError("give captions with --text or --prompts (one of them)")
-    captions: list[str | None] = list(args.text or [])
-    if args.prompts:
-        captions = gen.read_prompts(args.prompts)
-    if not captions:
-        captions = [None]  # reaction without text
-    if (args.edit is None) != (args.frames_range is None):
-        raise ValueError("--edit FILE needs --frames A:B (and --frames A:B needs --edit)")
-    if args.reaction and args.edit:
-        raise ValueError("--reaction and --edit are exclusive")
-    count = args.samples or defaults["samples"]
-    folders = gen.sample_folders(captions, count, Path(args.out or defaults["out"]))
-    generator = load_generator(args.checkpoint, vq_checkpoint=args.vq_checkpoint)
-    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    generator.net.to(device)
-    generator.vq.to(device)
-    generator.text.encoder.to(device)
-    kind = gen.dataset_kind(generator)
-    fps = args.fps or defaults["fps"]
-    sampler = defaults["sampler"]
-    mode_iterations = defaults["reaction_iterations"] if args.reaction else sampler["iterations"]
-    settings = gen.Settings(
-        iterations=args.iterations or mode_iterations,
-        cfg_scale=sampler["cfg_scale"] if args.cfg_scale is None else args.cfg_scale,
-        top_k_ratio=args.top_k or sampler["top_k_ratio"],
-        temperature=sampler["temperature"] if args.temperature is None else args.temperature,
-        batch_size=args.batch_size or defaults["batch_size"],
-        fps=fps,
-    )
-    reaction = edit = None
-    frames = 0
-    if args.reaction:
-        reaction = gen.load_motion_file(args.reaction, generator)[0]
-    elif args.edit:
-        motion = gen.load_motion_file(args.edit, generator)
-        if motion.shape[0] != 2:
-            raise ValueError(f"{args.edit}: editing needs both persons, (2, T, ...) features")
-        region = gen.edit_region(
-            motion.shape[1] // FRAMES_PER_STEP, args.frames_range, args.person, generator.net.rows
-        )
-        edit = (motion, region)
-    else:
-        seconds = args.seconds if args.length_frames is None else None
-        if seconds is None and args.length_frames is None:
-            seconds = defaults["seconds"]
-        frames = gen.frames_from(
-            seconds=seconds, frames=args.length_frames, fps=fps, max_frames=gen.MAX_FRAMES[kind]
-        )
-    start = time.perf_counter()
-    samples = gen.generate_samples(
-        generator,
-        captions,
-        frames=frames,
-        samples=count,
-        seed=defaults["seed"] if args.seed is None else args.seed,
-        settings=settings,
-        reaction=reaction,
-        edit=edit,
-        progress=True,
-    )
-    out = Path(args.out or defaults["out"])
-    renders = [] if args.no_render else list(defaults["renders"])
-    for sample, directory in zip(samples, folders, strict=True):
-        paths = gen.write_sample(
-            sample, directory, generator=generator, settings=settings, renders=renders
-        )
-        frames_out = sample.features.shape[1]
-        print(
-            f"{directory}: {sample.mode}, {frames_out} frames ({frames_out / fps:.1f} s), seed "
-            f"{sample.seed}, {sample.caption or '(no text)'!r} -> {', '.join(sorted(paths))}"
-        )
-    print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
+    fields = {name: getattr(args, name) for name in gen.Request.__dataclass_fields__}
+    gen.run(gen.Request(**fields))
     return 0
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -23,7 +24,7 @@ from omegaconf import OmegaConf
 
 from intermask.config_files import config_dir
 from intermask.interm.decoding import CFG_SCALE, ITERATIONS, TEMPERATURE, TOP_K_RATIO, Edit
-from intermask.interm.load import LoadedGenerator
+from intermask.interm.load import LoadedGenerator, load_generator
 from intermask.interm.sampler import InteractionSampler
 from intermask.utils.files import file_hash
 from intermask.vq.model import FRAMES_PER_STEP
@@ -321,3 +322,115 @@ def render_sample(
             paths["html"],
         )
     return paths
+
+
+@dataclass(frozen=True)
+class Request:
+    """What ``intermask generate`` was asked (the CLI's options, parsed and range-checked);
+    None takes the value of configs/generate.yaml and its sampler group."""
+
+    checkpoint: str
+    text: list[str] | None = None
+    prompts: str | None = None
+    vq_checkpoint: str | None = None
+    seconds: float | None = None
+    length_frames: int | None = None
+    samples: int | None = None
+    seed: int | None = None
+    cfg_scale: float | None = None
+    iterations: int | None = None
+    top_k: float | None = None
+    temperature: float | None = None
+    batch_size: int | None = None
+    fps: float | None = None
+    reaction: str | None = None
+    edit: str | None = None
+    frames_range: tuple[int, int] | None = None
+    person: int | None = None
+    device: str | None = None
+    out: Path | None = None
+    no_render: bool = False
+
+
+def run(request: Request) -> list[Path]:
+    """The generate job: captions (or a reaction / edit input) -> sample folders with arrays,
+    JSON and renders; returns the folders. Inputs are checked before the generator is loaded,
+    and no existing sample folder is overwritten."""
+    defaults = default_settings()
+    if bool(request.text) == bool(request.prompts) and not request.reaction:
+        raise ValueError("give captions with --text or --prompts (one of them)")
+    captions: list[str | None] = list(request.text or [])
+    if request.prompts:
+        captions = read_prompts(request.prompts)
+    if not captions:
+        captions = [None]  # reaction without text
+    if (request.edit is None) != (request.frames_range is None):
+        raise ValueError("--edit FILE needs --frames A:B (and --frames A:B needs --edit)")
+    if request.reaction and request.edit:
+        raise ValueError("--reaction and --edit are exclusive")
+    count = request.samples or defaults["samples"]
+    folders = sample_folders(captions, count, Path(request.out or defaults["out"]))
+    generator = load_generator(request.checkpoint, vq_checkpoint=request.vq_checkpoint)
+    device = request.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    generator.net.to(device)
+    generator.vq.to(device)
+    generator.text.encoder.to(device)
+    kind = dataset_kind(generator)
+    fps = request.fps or defaults["fps"]
+    sampler = defaults["sampler"]
+    mode_iterations = defaults["reaction_iterations"] if request.reaction else sampler["iterations"]
+    settings = Settings(
+        iterations=request.iterations or mode_iterations,
+        cfg_scale=sampler["cfg_scale"] if request.cfg_scale is None else request.cfg_scale,
+        top_k_ratio=request.top_k or sampler["top_k_ratio"],
+        temperature=sampler["temperature"] if request.temperature is None else request.temperature,
+        batch_size=request.batch_size or defaults["batch_size"],
+        fps=fps,
+    )
+    reaction = edit = None
+    frames = 0
+    if request.reaction:
+        reaction = load_motion_file(request.reaction, generator)[0]
+    elif request.edit:
+        motion = load_motion_file(request.edit, generator)
+        if motion.shape[0] != 2:
+            raise ValueError(f"{request.edit}: editing needs both persons, (2, T, ...) features")
+        region = edit_region(
+            motion.shape[1] // FRAMES_PER_STEP,
+            request.frames_range,
+            request.person,
+            generator.net.rows,
+        )
+        edit = (motion, region)
+    else:
+        seconds = request.seconds if request.length_frames is None else None
+        if seconds is None and request.length_frames is None:
+            seconds = defaults["seconds"]
+        frames = frames_from(
+            seconds=seconds, frames=request.length_frames, fps=fps, max_frames=MAX_FRAMES[kind]
+        )
+    start = time.perf_counter()
+    samples = generate_samples(
+        generator,
+        captions,
+        frames=frames,
+        samples=count,
+        seed=defaults["seed"] if request.seed is None else request.seed,
+        settings=settings,
+        reaction=reaction,
+        edit=edit,
+        progress=True,
+    )
+    out = Path(request.out or defaults["out"])
+    renders = [] if request.no_render else list(defaults["renders"])
+    for sample, directory in zip(samples, folders, strict=True):
+        paths = write_sample(
+            sample, directory, generator=generator, settings=settings, renders=renders
+        )
+        frames_out = sample.features.shape[1]
+        print(
+            f"{directory}: {sample.mode}, {frames_out} frames ({frames_out / fps:.1f} s), seed "
+            f"{sample.seed}, {sample.caption or '(no text)'!r} -> {', '.join(sorted(paths))}"
+        )
+    print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
+    return folders

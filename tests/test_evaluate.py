@@ -208,6 +208,19 @@ def test_captions_sharing_a_prefix_or_repeated_get_their_own_folders(runs, tmp_p
     assert recorded == captions
 
 
+def test_the_generate_job_runs_from_python_as_from_the_command_line(runs, tmp_path):
+    from intermask.generate import Request, run
+
+    request = Request(checkpoint=str(runs["gen"]), text=["they hug"], samples=2, seconds=1.0)
+    folders = run(
+        Request(**{**request.__dict__, "iterations": 1, "no_render": True, "out": tmp_path})
+    )
+    assert [f.name for f in folders] == ["they_hug_00-00", "they_hug_00-01"]
+    records = [json.loads((f / "sample.json").read_text()) for f in folders]
+    assert [r["seed"] for r in records] == [0, 1] and records[0]["settings"]["iterations"] == 1
+    assert np.load(folders[0] / "features.npy").shape == (2, 28, 262)  # 1 s at 30 fps -> 28
+
+
 def _features_file(tmp_path: Path) -> Path:
     generator = np.random.default_rng(0)
     path = tmp_path / "pair.npy"
