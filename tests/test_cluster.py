@@ -33,12 +33,8 @@ def _local_sweep(sweep: Path, data_root: Path, *overrides: str) -> list[str]:
         "hydra.launcher.timeout_min=10",
         f"hydra.sweep.dir={sweep}",
         f"data.root={data_root}",
-        "data.batch_size=16",
-        "data.num_workers=0",
-        "model.net.encoder.width=16",
-        "trainer=cpu",
+        "debug=vq",
         "trainer.limit_val_batches=1",
-        "callbacks.rich_progress_bar=null",
         "callbacks.sample_animations=null",
         *overrides,
     ]

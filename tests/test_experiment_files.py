@@ -54,3 +54,20 @@ def test_experiment_composes_and_resolves(experiment):
     if job != "eval":
         assert isinstance(container["trainer"]["max_epochs"], int)
         assert container["model"]["_target_"].startswith("intermask.")
+
+
+@pytest.mark.parametrize("debug", ["vq", "gen", "evaluator", "arflow"])
+def test_debug_group_composes_a_seconds_long_cpu_run(debug):
+    job = f"train_{debug}"
+    overrides = [f"debug={debug}", "paths.output_dir=runs/x", *REQUIRED.get(job, [])]
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(job, overrides=overrides)
+    container = OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
+    trainer = container["trainer"]
+    assert trainer["accelerator"] == "cpu" and trainer["max_epochs"] == 1
+    assert (
+        trainer["limit_train_batches"] <= 3 and container["callbacks"]["rich_progress_bar"] is None
+    )
+    assert sorted(p.stem for p in Path(CONFIG_DIR, "debug").glob("*.yaml")) == sorted(
+        ["vq", "gen", "evaluator", "arflow"]
+    )

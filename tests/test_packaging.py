@@ -87,13 +87,8 @@ def test_a_composed_job_trains_from_an_empty_folder(installed, tmp_path, synthet
         "--config-name",
         "train_vq",
         f"data.root={synthetic_interhuman_root}",
-        "data.batch_size=8",
-        "data.num_workers=0",
-        "model.net.encoder.width=16",
-        "model.net.quantizer.codebook_size=16",
-        "trainer=cpu",
+        "debug=vq",  # the shipped configs/debug group
         "+trainer.fast_dev_run=2",
-        "callbacks.rich_progress_bar=null",
         "callbacks.sample_animations=null",
         f"hydra.run.dir={tmp_path / 'run'}",
     )

@@ -13,13 +13,6 @@ from omegaconf import open_dict
 from intermask.reaction import ARFlowModule, Guidance, ReactionDecoder, sample_reactions
 from intermask.train import CONFIG_DIR, count_parameters, train
 
-TINY_NET = [
-    "model.net.width=32",
-    "model.net.depth=1",
-    "model.net.heads=2",
-    "model.net.ff=64",
-]
-
 
 def _compose(overrides: list[str]):
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
@@ -31,21 +24,8 @@ def _config(data: str, data_root: Path, output_dir: Path):
         [
             f"data={data}",
             f"data.root={data_root}",
-            "data.batch_size=4",
-            "data.num_workers=0",
-            "data.max_length=40",
-            "text=tiny_random",
+            "debug=arflow",
             f"text.cache_dir={output_dir / 'text_cache'}",
-            "model.net.text_dim=64",  # the tiny text tower's width
-            "model.validation_samples=2",
-            "model.sample_steps=2",
-            *TINY_NET,
-            "trainer=cpu",
-            "trainer.max_epochs=1",
-            "trainer.max_steps=-1",
-            "trainer.limit_train_batches=2",
-            "trainer.limit_val_batches=1",
-            "callbacks.rich_progress_bar=null",
         ]
     )
     with open_dict(cfg):

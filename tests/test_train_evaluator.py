@@ -41,15 +41,7 @@ def _config(data: str, data_root: Path, output_dir: Path, overrides: list[str] =
             overrides=[
                 f"data={data}",
                 f"data.root={data_root}",
-                "data.batch_size=8",
-                "data.eval_batch_size=8",
-                "data.num_workers=0",
-                "trainer=cpu",
-                "trainer.max_epochs=1",
-                "trainer.limit_train_batches=2",
-                "trainer.limit_val_batches=1",
-                "trainer.log_every_n_steps=1",
-                "callbacks.rich_progress_bar=null",
+                "debug=evaluator",
                 *overrides,
             ],
         )

@@ -29,26 +29,9 @@ def _gen_config(data_root: Path, vq_ckpt: Path, output_dir: Path, data: str = "s
             overrides=[
                 f"data={data}",
                 f"data.root={data_root}",
-                "data.batch_size=4",
-                "data.num_workers=0",
-                "text=tiny_random",
+                "debug=gen",
                 f"text.cache_dir={output_dir / 'text_cache'}",
                 f"vq_ckpt={vq_ckpt}",
-                "model.net.codebook_size=32",  # the tiny tokenizer's codebook
-                "model.net.width=32",
-                "model.net.heads=2",
-                "model.net.depth=1",
-                "model.net.ff=64",
-                "model.net.token_embed_dim=32",
-                "model.net.text_dim=64",  # the tiny text tower's width
-                "model.net.text_layers=1",
-                "model.net.text_heads=2",
-                "model.net.text_ff=64",
-                "trainer=cpu",
-                "trainer.max_epochs=1",
-                "trainer.limit_train_batches=2",
-                "trainer.limit_val_batches=1",
-                "callbacks.rich_progress_bar=null",
             ],
         )
     with open_dict(cfg):

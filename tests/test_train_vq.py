@@ -22,16 +22,7 @@ def _config(data_root: Path, output_dir: Path, overrides: list[str] = (), data: 
             overrides=[
                 f"data={data}",
                 f"data.root={data_root}",
-                "data.batch_size=16",
-                "data.num_workers=0",
-                "model.net.encoder.width=16",
-                "model.net.quantizer.codebook_size=32",
-                "trainer=cpu",
-                "trainer.max_epochs=1",
-                "trainer.limit_train_batches=3",
-                "trainer.limit_val_batches=2",
-                "trainer.log_every_n_steps=1",
-                "callbacks.rich_progress_bar=null",
+                "debug=vq",
                 *overrides,
             ],
         )
