@@ -369,7 +369,8 @@ def run(request: Request) -> list[Path]:
     if request.reaction and request.edit:
         raise ValueError("--reaction and --edit are exclusive")
     count = request.samples or defaults["samples"]
-    folders = sample_folders(captions, count, Path(request.out or defaults["out"]))
+    out = Path(request.out or defaults["out"])
+    folders = sample_folders(captions, count, out)
     generator = load_generator(request.checkpoint, vq_checkpoint=request.vq_checkpoint)
     device = request.device or ("cuda" if torch.cuda.is_available() else "cpu")
     generator.net.to(device)
@@ -421,7 +422,6 @@ def run(request: Request) -> list[Path]:
         edit=edit,
         progress=True,
     )
-    out = Path(request.out or defaults["out"])
     renders = [] if request.no_render else list(defaults["renders"])
     for sample, directory in zip(samples, folders, strict=True):
         paths = write_sample(

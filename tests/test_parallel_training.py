@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from omegaconf import OmegaConf, open_dict
 from test_train_gen import _gen_config
 from test_train_vq import _config as vq_config
 from test_train_vq import _last
@@ -89,8 +90,6 @@ def test_gen_two_processes_equal_one(synthetic_interhuman_root, tmp_path):
                 "net": {"dropout": 0.0, "text_dropout": 0.0},  # dropout draws per process
             },
         }
-        from omegaconf import OmegaConf, open_dict
-
         with open_dict(cfg):
             cfg.merge_with(OmegaConf.create(overrides))
             cfg.callbacks.sample_animations = None

@@ -20,6 +20,7 @@ import torch
 from torch.utils.data import Sampler
 
 from intermask.data.errors import DataError, SkippedClip
+from intermask.utils.seeds import keyed_generator
 
 log = logging.getLogger(__name__)
 
@@ -204,11 +205,7 @@ class EpochSampler(Sampler[tuple[int, int]]):
     def _global_order(self) -> list[int]:
         if not self.shuffle:
             return list(range(self.size))
-        state = np.random.SeedSequence([self.seed, self.epoch]).generate_state(1, dtype=np.uint64)[
-            0
-        ]
-        gen = torch.Generator().manual_seed(int(state) & 0x7FFF_FFFF_FFFF_FFFF)
-        return torch.randperm(self.size, generator=gen).tolist()
+        return torch.randperm(self.size, generator=keyed_generator(self.seed, self.epoch)).tolist()
 
     def _rank_order(self, order: list[int]) -> list[int]:
         """This rank's share of ``order``: its block of every global batch."""
@@ -230,11 +227,7 @@ class EpochSampler(Sampler[tuple[int, int]]):
     def __len__(self) -> int:
         if self.world_size == 1:
             return self.size
-        step = self.batch_size * self.world_size
-        full, tail = divmod(self.size, step)
-        return full * self.batch_size + (
-            0 if self.drop_last or not tail else -(-tail // self.world_size)
-        )
+        return len(self._rank_order(list(range(self.size))))
 
     def __iter__(self) -> Iterator[tuple[int, int]]:
         order = self._global_order()

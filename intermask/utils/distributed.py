@@ -1,8 +1,8 @@
 """What data-parallel training needs to equal one process with the same global batch.
 
 Each rank holds a contiguous block of the global batch (``EpochSampler``). Random draws of a
-training step are made for the whole global batch, identically on every rank (the global
-generator advances the same way in every process), and each rank keeps its rows; losses that
+training step are made for the whole global batch, identically on every rank (from the batch's
+keyed generator, ``ScheduledModule.batch_generator``), and each rank keeps its rows; losses that
 average over a varying number of items (masked tokens) divide by the count of the whole
 global batch. With one process all three are the identity.
 """

@@ -7,11 +7,11 @@ from collections.abc import Iterable, Mapping
 from typing import Any, NamedTuple
 
 import lightning as L
-import numpy as np
 import torch
 from torch import nn
 
 from intermask.utils.schedules import warmup_multistep_optimizers
+from intermask.utils.seeds import keyed_generator
 
 log = logging.getLogger(__name__)
 
@@ -65,11 +65,7 @@ class ScheduledModule(L.LightningModule):
             counter, stream = batch_idx, 1
         else:
             raise ValueError(f"stage must be 'train' or 'val', got {stage!r}")
-        state = np.random.SeedSequence([self.draw_seed, stream, counter]).generate_state(
-            1, np.uint64
-        )
-        generator = torch.Generator(device=self.device)
-        return generator.manual_seed(int(state[0]) & 0x7FFF_FFFF_FFFF_FFFF)
+        return keyed_generator(self.draw_seed, stream, counter, device=self.device)
 
     def skip_non_finite(self, terms: Mapping[str, torch.Tensor], batch: Mapping[str, Any]) -> bool:
         """True when this step must be skipped (policy ``skip``); raises :class:`NonFiniteLoss`

@@ -12,9 +12,8 @@ from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.quantizers import ResidualQuantizer
 from intermask.vq.views import TwoPersonView
 
-FRAMES_PER_STEP = (
-    4  # one token step covers 4 frames: the encoder halves time twice (convolutions.py)
-)
+# one token step covers 4 frames: the encoder halves time twice (convolutions.py)
+FRAMES_PER_STEP = 4
 
 
 class VQVAEOutput(NamedTuple):
