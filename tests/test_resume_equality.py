@@ -41,6 +41,14 @@ class KillAt(Callback):
             os.kill(os.getpid(), signal.SIGKILL)
 
 
+def _train_with_threads(cfg, threads: int) -> None:
+    """``train`` in a spawned child with the parent's intra-op thread count (a forked child
+    deadlocks in the parent's OpenMP pool once the parent has trained; a different count could
+    change the last bits of the epoch the resumed run starts from)."""
+    torch.set_num_threads(threads)
+    train(cfg)
+
+
 def _config(job: str, root: Path, vq_ckpt: Path | None, out: Path, *, kill=False, resume=None):
     if job == "vq":
         cfg = vq_config(root, out, [f"trainer.max_epochs={EPOCHS}"])
@@ -73,7 +81,9 @@ def test_sigkill_mid_epoch_then_resume_equals_the_uninterrupted_run(
     train(_config(job, root, vq_ckpt, tmp_path / "whole"))
 
     killed = _config(job, root, vq_ckpt, tmp_path / "killed", kill=True)
-    process = multiprocessing.get_context("fork").Process(target=train, args=(killed,))
+    process = multiprocessing.get_context("spawn").Process(
+        target=_train_with_threads, args=(killed, torch.get_num_threads())
+    )
     process.start()
     process.join(timeout=600)
     assert process.exitcode == -signal.SIGKILL
