@@ -95,6 +95,23 @@ def test_a_generator_refuses_a_tokenizer_it_was_not_trained_on(
     train(_gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path / "gen"))
     loaded = load_generator(tmp_path / "gen")  # its own tokenizer: fine
     assert loaded.vq_checkpoint == vq_checkpoint
+    # the network was built with the VQ's codebook size, which the checkpoint records
+    assert loaded.net.codebook_size == loaded.vq.quantizer.codebook_size == 32
+    gen_checkpoint = tmp_path / "gen" / "checkpoints" / "last.ckpt"
+    stored = torch.load(gen_checkpoint, map_location="cpu", weights_only=True)
+    del stored["hyper_parameters"]["codebook_size"]
+    unsized = tmp_path / "unsized" / "checkpoints" / "last.ckpt"
+    unsized.parent.mkdir(parents=True)
+    torch.save(stored, unsized)
+    (unsized.parent.parent / "config.yaml").write_text(
+        (tmp_path / "gen" / "config.yaml").read_text()
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"unsized/checkpoints/last.ckpt: its config leaves the "
+        r"codebook size to the VQ-VAE, but the checkpoint records none",
+    ):
+        load_generator(unsized)
     # the same architecture with other weights (another run, or a later epoch of it)
     other_run = tmp_path / "other_vq"
     (other_run / "checkpoints").mkdir(parents=True)

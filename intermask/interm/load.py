@@ -81,10 +81,18 @@ def load_generator(
             f"{vq_path}: the generator's VQ checkpoint (from {config_path}) is missing; pass "
             "vq_checkpoint= to point to it"
         )
+    hyper_parameters = run.stored.get("hyper_parameters", {})
     net = instantiate(net_config)
+    if not isinstance(net, InterMTransformer):  # the run took its codebook size from its VQ
+        if "codebook_size" not in hyper_parameters:
+            raise ValueError(
+                f"{run.checkpoint}: its config leaves the codebook size to the VQ-VAE, but the "
+                "checkpoint records none (hyper_parameters.codebook_size)"
+            )
+        net = net(codebook_size=int(hyper_parameters["codebook_size"]))
     net.load_state_dict(run.weights("net."))
     vq = load_vq(vq_path, map_location=map_location)
-    check_vq_matches(net, vq, run.stored.get("hyper_parameters", {}), run.checkpoint, vq_path)
+    check_vq_matches(net, vq, hyper_parameters, run.checkpoint, vq_path)
     text = instantiate(text_config)
     return LoadedGenerator(
         net.eval().requires_grad_(False),

@@ -105,7 +105,9 @@ class InterMModule(LossStepsModule):
     list of B strings.
 
     Args:
-        net: the Inter-M Transformer (its ``codebook_size`` and ``rows`` must match ``vq``).
+        net: the Inter-M Transformer (its ``codebook_size`` and ``rows`` must match ``vq``), or
+            a factory taking ``codebook_size``, called with the VQ's (what the configs give:
+            the codebook size has one owner, the tokenizer's checkpoint).
         vq: the trained single-person VQ-VAE; frozen, eval mode, not checkpointed. Tokens are
             its first quantizer layer (the base codes, section 3.2).
         text: feature cache in front of the frozen CLIP text encoder; not checkpointed.
@@ -132,7 +134,7 @@ class InterMModule(LossStepsModule):
     def __init__(
         self,
         *,
-        net: InterMTransformer,
+        net: InterMTransformer | Callable[..., InterMTransformer],
         vq: MotionVQVAE,
         text: TextFeatureCache,
         optimizer: Callable[..., Optimizer],
@@ -151,6 +153,8 @@ class InterMModule(LossStepsModule):
         if isinstance(vq.view, TwoPersonView):
             raise ValueError("the Inter-M Transformer needs a single-person VQ-VAE, got persons=2")
         vq_codes = vq.quantizer.codebook_size
+        if not isinstance(net, InterMTransformer):  # a factory: the VQ owns the codebook size
+            net = net(codebook_size=vq_codes)
         if vq_codes != net.codebook_size:
             raise ValueError(
                 f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"
@@ -190,6 +194,7 @@ class InterMModule(LossStepsModule):
                 "token_cache": bool(token_cache),
                 # the tokens mean something only to this VQ: loaders check it (load_generator)
                 "vq_digest": weights_digest(vq),
+                "codebook_size": int(vq_codes),  # what load_generator builds the network with
             },
             logger=False,
         )

@@ -34,7 +34,6 @@ EXPERIMENTS = {
 CPU_SETTINGS = {"gen_demo"}  # CPU-sized: paper switches, not paper sizes (tested below)
 SYNTHETIC_SETTINGS = {"gen_synthetic_long", "gen_synthetic_long_cpu"}  # long runs (tested below)
 TINY_NET = {
-    "codebook_size": 16,
     "width": 32,
     "heads": 2,
     "depth": 1,
@@ -71,7 +70,7 @@ def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
     assert landed == PAPER
     net = cfg.model.net
     assert (net.width, net.heads, net.depth, net.ff, net.dropout) == (384, 6, 6, 1024, 0.2)
-    assert cfg.data.max_length == 96 and net.codebook_size == 512  # the demo's crops and tokens
+    assert cfg.data.max_length == 96  # the demo's crops; the codebook size comes from the VQ
     assert cfg.trainer.max_epochs == 500 and cfg.trainer.accelerator == "gpu"
     assert cfg.callbacks.protocol.every_n_epochs == 10
     assert cfg.callbacks.model_checkpoint.monitor == "protocol/fid"
@@ -94,7 +93,15 @@ def test_demo_setting_keeps_the_paper_switches_on_a_cpu_sized_network():
     # had the better top-3 and success (docs/learning.md); every other paper switch stays on
     assert landed == {**PAPER, "step_unroll": False}
     assert cfg.trainer.accelerator == "cpu" and cfg.text.encoder.pretrained is None
-    assert cfg.model.net.text_dim == 64 and cfg.model.net.codebook_size == 512  # tiny text, vq_demo
+    assert cfg.model.net.text_dim == 64  # the tiny text tower
+
+
+def test_no_generator_config_repeats_the_codebook_size_its_vq_owns():
+    # the network is a factory InterMModule calls with the loaded VQ's codebook size
+    for experiment in sorted(set(EXPERIMENTS) | CPU_SETTINGS | SYNTHETIC_SETTINGS):
+        extra = ["callbacks.protocol.evaluator=unused.ckpt"] * (experiment in SYNTHETIC_SETTINGS)
+        net = _compose(experiment, *extra).model.net
+        assert net._partial_ is True and "codebook_size" not in net, experiment
 
 
 @pytest.mark.parametrize("experiment", sorted(EXPERIMENTS))
@@ -113,7 +120,7 @@ def test_gen_experiment_lands_its_switches_on_the_paper_setting(experiment):
     assert model.warmup_fraction == pytest.approx(0.25 / 500) and model.condition_drop == 0.1
     assert (net.width, net.depth, net.heads, net.double_residual_quirk) == (384, 6, 6, False)
     OmegaConf.resolve(cfg)
-    tiny = instantiate(OmegaConf.merge(net, TINY_NET))
+    tiny = instantiate(OmegaConf.merge(net, TINY_NET))(codebook_size=16)  # as InterMModule does
     assert isinstance(tiny, InterMTransformer) and tiny.modeling == expected["modeling"]
     assert all(
         (block.cross_attention is not None) == net.use_cross_attention for block in tiny.blocks
