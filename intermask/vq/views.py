@@ -18,6 +18,18 @@ from intermask.motion import interhuman as ih
 from intermask.motion import interx as ix
 from intermask.motion.skeleton import NUM_JOINTS
 
+_HORIZONTAL = [0, 2]  # x and z of a position (Y up); the height stays in the shared frame
+
+
+def _with_positions(joints: torch.Tensor, axes: list[int], values: torch.Tensor) -> torch.Tensor:
+    """``joints (..., 22, 12)`` with the position channels ``axes`` of joints 1..21 replaced by
+    ``values (..., 21, len(axes))`` (a new tensor: autograd sees both inputs)."""
+    columns = [joints[..., 1:, c : c + 1] for c in range(3)]
+    for k, axis in enumerate(axes):
+        columns[axis] = values[..., k : k + 1]
+    body = torch.cat((*columns, joints[..., 1:, 3:]), dim=-1)
+    return torch.cat((joints[..., :1, :], body), dim=-2)
+
 
 class Geometry(NamedTuple):
     positions: (
@@ -28,18 +40,33 @@ class Geometry(NamedTuple):
 
 
 class InterHumanView(nn.Module):
-    """Normalized (B, T, 262) features <-> (B, T, 22, 12) [pos, vel, rot6d] per joint."""
+    """Normalized (B, T, 262) features <-> (B, T, 22, 12) [pos, vel, rot6d] per joint.
+
+    ``relative_positions`` (off in the paper's configuration): the horizontal (x, z) position of
+    every joint but the root enters the image in metres from the root, not in the shared frame.
+    Then only the root's channels say where the person stands, and the other joints' codes are
+    free for the pose: in the shared frame every joint's code must also say where the person
+    stands, and a small codebook tiles those positions with the rest pose and loses the rare
+    ones (raised arms, kicks; docs/learning.md, fourth pass). The map is linear and exactly
+    inverted by :meth:`from_joints`, so the features, the losses and the decoded motion keep
+    the dataset's frame.
+    """
 
     num_joints = NUM_JOINTS
     channels = ih.JOINT_VIEW_CHANNELS
     feature_shape = (ih.FEATURE_DIM,)
 
     def __init__(
-        self, *, mean: torch.Tensor | None = None, std: torch.Tensor | None = None
+        self,
+        *,
+        mean: torch.Tensor | None = None,
+        std: torch.Tensor | None = None,
+        relative_positions: bool = False,
     ) -> None:
         """Statistics may come later (``set_statistics``, called with the datamodule's); a
         checkpoint restores them with the weights."""
         super().__init__()
+        self.relative_positions = relative_positions
         self.register_buffer("mean", torch.zeros(self.feature_shape))
         self.register_buffer("std", torch.ones(self.feature_shape))
         self.register_buffer("has_statistics", torch.tensor(False))
@@ -63,11 +90,31 @@ class InterHumanView(nn.Module):
 
     def to_joints(self, features: torch.Tensor) -> torch.Tensor:
         """(B, T, 262) normalized -> (B, T, 22, 12); the root's absent rotation is 0."""
-        return ih.features_to_joint_view(features)
+        joints = ih.features_to_joint_view(features)
+        if not self.relative_positions:
+            return joints
+        metres = self._position_metres(joints[..., :3])
+        axes = _HORIZONTAL
+        offsets = metres[..., 1:, axes] - metres[..., :1, axes]  # (B, T, 21, axes)
+        return _with_positions(joints, axes, offsets)
 
     def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
         """(B, T, 22, 12) -> (B, T, 262); contacts come back as 0 in normalized space."""
+        if self.relative_positions:
+            axes = _HORIZONTAL
+            root = self._position_metres(joints[..., :1, :3])[..., axes]  # (B, T, 1, axes)
+            shared = joints[..., 1:, axes] + root  # metres in the shared frame
+            scale = self.std[ih.POSITIONS].view(NUM_JOINTS, 3)[1:, axes]
+            offset = self.mean[ih.POSITIONS].view(NUM_JOINTS, 3)[1:, axes]
+            joints = _with_positions(joints, axes, (shared - offset) / scale)
         return ih.joint_view_to_features(joints)
+
+    def _position_metres(self, normalized: torch.Tensor) -> torch.Tensor:
+        """(..., J, 3) normalized positions of the first J joints -> metres."""
+        joints = normalized.shape[-2]
+        std = self.std[ih.POSITIONS].view(NUM_JOINTS, 3)[:joints]
+        mean = self.mean[ih.POSITIONS].view(NUM_JOINTS, 3)[:joints]
+        return normalized * std + mean
 
     def reconstruction_mask(self, device: torch.device) -> torch.Tensor:
         """(262,) bool: the dims the reconstruction loss covers (all but the 4 contacts)."""
