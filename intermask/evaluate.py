@@ -30,7 +30,7 @@ from intermask.evaluation.sources import (
     motion_joints,
 )
 from intermask.train import CONFIG_DIR
-from intermask.utils.files import file_hash
+from intermask.utils.files import file_hash, resolve_checkpoint
 from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
@@ -62,9 +62,12 @@ def build_sources(
     checkpoints: dict[str, str] = {}
     if cfg.mode == "reconstruction":
         if not cfg.vq_ckpt:
-            raise ValueError("mode=reconstruction needs vq_ckpt=<train_vq run>/checkpoints/*.ckpt")
-        checkpoints["vq"] = f"{cfg.vq_ckpt} ({file_hash(cfg.vq_ckpt)})"
-        return [VQReconstruction(vq=load_vq(cfg.vq_ckpt).to(device))], checkpoints
+            raise ValueError(
+                "mode=reconstruction needs vq_ckpt=<train_vq run or its checkpoints/*.ckpt>"
+            )
+        vq_path = resolve_checkpoint(cfg.vq_ckpt, kind="VQ")  # a run folder: its last.ckpt
+        checkpoints["vq"] = f"{vq_path} ({file_hash(vq_path)})"
+        return [VQReconstruction(vq=load_vq(vq_path).to(device))], checkpoints
     arflow_ckpt = cfg.get("arflow_ckpt") if cfg.mode == "reaction" else None
     if not cfg.gen_ckpt and not arflow_ckpt:
         wanted = "gen_ckpt=<train_gen run or .ckpt>"

@@ -47,7 +47,8 @@ def _eval_config(
                 f"mode={mode}",
                 f"eval_ckpt={runs['evaluator']}",
                 f"gen_ckpt={runs['gen']}",
-                f"vq_ckpt={runs['vq'] if mode == 'reconstruction' else ''}",
+                # a run folder, as gen_ckpt takes: its checkpoints/last.ckpt
+                f"vq_ckpt={runs['vq'].parent.parent if mode == 'reconstruction' else ''}",
                 "fast=true",
                 "fast_replications=2",
                 "protocol.eval_batch_size=8",
