@@ -7,7 +7,7 @@ back as ``(B, H, W)`` per layer. Codebooks are buffers updated by exponential mo
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import torch
 import torch.distributed as dist
@@ -16,8 +16,6 @@ from einops import rearrange
 from torch import nn
 
 from intermask.utils.distributed import all_reduce_sum, gather_rows, process_group
-
-ResetSampling = Literal["uniform", "error"]
 
 
 class QuantizerOutput(NamedTuple):
@@ -51,11 +49,6 @@ class EMAQuantizer(nn.Module):
         decay: EMA decay of code counts and sums (paper: 0.99).
         reset_threshold: codes whose EMA count falls below it are re-initialised from random
             encoder outputs of the current batch (reference: 1.0).
-        reset_sampling: how those outputs are drawn. "uniform" (paper and reference): any row
-            alike. "error": with probability proportional to the squared distance to the code
-            the row was assigned before this step's update (k-means++ seeding), so a dead code
-            moves to where the codebook is worst, which is where the rare poses are: uniform
-            draws land mostly on the common ones, which already have codes (docs/learning.md).
         stochastic_temperature: when set, training picks codes by Gumbel-max sampling of
             -distance / temperature (the reference's choice, 0.5) instead of the nearest code;
             evaluation always uses the nearest code.
@@ -70,15 +63,11 @@ class EMAQuantizer(nn.Module):
         decay: float = 0.99,
         reset_threshold: float = 1.0,
         stochastic_temperature: float | None = None,
-        reset_sampling: ResetSampling = "uniform",
         eps: float = 1e-5,
     ) -> None:
         super().__init__()
         if not 0.0 < decay < 1.0:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
-        if reset_sampling not in ("uniform", "error"):
-            raise ValueError(f"reset_sampling must be 'uniform' or 'error', got {reset_sampling!r}")
-        self.reset_sampling = reset_sampling
         if stochastic_temperature is not None and stochastic_temperature <= 0:
             raise ValueError(
                 f"stochastic_temperature must be positive or None, got {stochastic_temperature}"
@@ -166,23 +155,12 @@ class EMAQuantizer(nn.Module):
 
     @torch.no_grad()
     def _random_rows(
-        self,
-        flat: torch.Tensor,
-        count: int,
-        generator: torch.Generator | None,
-        weights: torch.Tensor | None = None,
+        self, flat: torch.Tensor, count: int, generator: torch.Generator | None
     ) -> torch.Tensor:
         """``count`` encoder outputs of the global batch (all ranks' rows, gathered) drawn at
         random, with repetition only when the batch is small: the same rows on every rank and
-        as in one process with the global batch. With ``weights`` (N,) >= 0 the draw is with
-        repetition, row i with probability proportional to ``weights[i]`` (uniform if all 0)."""
+        as in one process with the global batch."""
         flat = gather_rows(flat)
-        if weights is not None:
-            weights = gather_rows(weights[:, None])[:, 0].double()
-            if not bool(weights.sum() > 0):
-                weights = torch.ones_like(weights)
-            drawn = torch.multinomial(weights, count, replacement=True, generator=generator)
-            return flat[drawn]
         if flat.shape[0] >= count:
             order = torch.randperm(flat.shape[0], generator=generator, device=flat.device)
             return flat[order[:count]]
@@ -209,9 +187,6 @@ class EMAQuantizer(nn.Module):
         """
         valid = torch.isfinite(flat).all(dim=-1)
         flat = torch.where(valid[:, None], flat, torch.zeros_like(flat))
-        errors = None
-        if self.reset_sampling == "error":  # before the update moves the codes
-            errors = (flat - self.codebook[indices]).square().sum(-1) * valid
         counts = all_reduce_sum(
             torch.bincount(indices, weights=valid.float(), minlength=self.codebook_size).float()
         )
@@ -223,7 +198,7 @@ class EMAQuantizer(nn.Module):
         self.codebook.copy_(self.ema_sum / smoothed[:, None])
         dead = self.ema_count < self.reset_threshold
         if dead.any():
-            replacement = self._random_rows(flat, self.codebook_size, generator, errors)
+            replacement = self._random_rows(flat, self.codebook_size, generator)
             if process_group()[1] > 1:
                 dist.broadcast(replacement, src=0)
             self.codebook[dead] = replacement[dead]
@@ -249,7 +224,6 @@ class ResidualQuantizer(nn.Module):
         decay: float = 0.99,
         reset_threshold: float = 1.0,
         stochastic_temperature: float | None = None,
-        reset_sampling: ResetSampling = "uniform",
     ) -> None:
         super().__init__()
         if num_quantizers < 1:
@@ -264,7 +238,6 @@ class ResidualQuantizer(nn.Module):
                 decay=decay,
                 reset_threshold=reset_threshold,
                 stochastic_temperature=stochastic_temperature,
-                reset_sampling=reset_sampling,
             )
             for _ in range(num_quantizers)
         )

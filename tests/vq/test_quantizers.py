@@ -51,40 +51,6 @@ def test_dead_codes_are_reset_to_current_encoder_outputs():
     torch.testing.assert_close(quantizer.ema_count[1:], torch.ones(2))
 
 
-def _one_outlier_batch(reset_sampling: str, seed: int) -> EMAQuantizer:
-    """Codes 1 and 2 die; the batch holds 99 vectors on code 0 and one far outlier."""
-    quantizer = EMAQuantizer(
-        codebook_size=3, dim=2, decay=0.9, reset_threshold=1.0, reset_sampling=reset_sampling
-    ).train()
-    quantizer.codebook.copy_(torch.tensor([[0.0, 0.0], [100.0, 100.0], [-100.0, 100.0]]))
-    quantizer.ema_sum.copy_(quantizer.codebook)
-    quantizer.ema_count.fill_(1.0)
-    quantizer.initialized.fill_(True)
-    common = torch.randn(99, 2, generator=torch.Generator().manual_seed(seed)) * 0.01
-    vectors = torch.cat((common, torch.tensor([[5.0, -5.0]])))  # the outlier: 50 = squared distance
-    quantizer(vectors.T.reshape(1, 2, 1, 100), generator=torch.Generator().manual_seed(seed))
-    return quantizer
-
-
-def test_error_weighted_reset_sends_dead_codes_to_the_worst_quantized_vectors():
-    outlier = torch.tensor([5.0, -5.0])
-    for seed in range(5):
-        # 99 vectors within ~0.03 of code 0 share ~0.01 of the squared error; the outlier has 50:
-        # both dead codes land on it (probability > 0.999 each)
-        error = _one_outlier_batch("error", seed)
-        for code in (1, 2):
-            torch.testing.assert_close(error.codebook[code], outlier)
-    # a uniform draw takes the outlier for a given code with probability 1/100
-    uniform = [_one_outlier_batch("uniform", seed).codebook[1:] for seed in range(5)]
-    hits = sum(int(torch.isclose(codes, outlier).all(-1).sum()) for codes in uniform)
-    assert hits <= 1
-
-
-def test_reset_sampling_must_be_named():
-    with pytest.raises(ValueError, match="reset_sampling must be 'uniform' or 'error', got 'far'"):
-        EMAQuantizer(codebook_size=2, dim=2, reset_sampling="far")
-
-
 def test_eval_mode_picks_the_nearest_code_and_leaves_the_codebook_alone():
     quantizer = EMAQuantizer(codebook_size=2, dim=1, stochastic_temperature=0.5).eval()
     quantizer.codebook.copy_(torch.tensor([[0.0], [1.0]]))
