@@ -46,10 +46,10 @@ class InterHumanView(nn.Module):
     every joint but the root enters the image in metres from the root, not in the shared frame.
     Then only the root's channels say where the person stands, and the other joints' codes are
     free for the pose: in the shared frame every joint's code must also say where the person
-    stands, and a small codebook tiles those positions with the rest pose and loses the rare
-    ones (raised arms, kicks; docs/learning.md, fourth pass). The map is linear and exactly
-    inverted by :meth:`from_joints`, so the features, the losses and the decoded motion keep
-    the dataset's frame.
+    stands. On the CPU demo's tokenizer it raised reconstruction success from 41% to 51% and
+    kept the raised arms of the wave (docs/learning.md, fourth pass). The map is linear and
+    exactly inverted by :meth:`from_joints`, so the features, the losses and the decoded motion
+    keep the dataset's frame.
     """
 
     num_joints = NUM_JOINTS
