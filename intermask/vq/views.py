@@ -93,25 +93,25 @@ class InterHumanView(nn.Module):
         joints = ih.features_to_joint_view(features)
         if not self.relative_positions:
             return joints
-        metres = self._position_metres(joints[..., :3])[..., _HORIZONTAL]  # (B, T, 22, 2)
+        mean, std = self._position_statistics()
+        metres = (joints[..., :3] * std + mean)[..., _HORIZONTAL]  # (B, T, 22, 2)
         return _with_horizontal(joints, metres[..., 1:, :] - metres[..., :1, :])
 
     def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
         """(B, T, 22, 12) -> (B, T, 262); contacts come back as 0 in normalized space."""
         if self.relative_positions:
-            root = self._position_metres(joints[..., :1, :3])[..., _HORIZONTAL]  # (B, T, 1, 2)
+            mean, std = (s[..., _HORIZONTAL] for s in self._position_statistics())  # (22, 2)
+            root = joints[..., :1, _HORIZONTAL] * std[:1] + mean[:1]  # (B, T, 1, 2) metres
             shared = joints[..., 1:, _HORIZONTAL] + root  # metres in the shared frame
-            scale = self.std[ih.POSITIONS].view(NUM_JOINTS, 3)[1:, _HORIZONTAL]
-            offset = self.mean[ih.POSITIONS].view(NUM_JOINTS, 3)[1:, _HORIZONTAL]
-            joints = _with_horizontal(joints, (shared - offset) / scale)
+            joints = _with_horizontal(joints, (shared - mean[1:]) / std[1:])
         return ih.joint_view_to_features(joints)
 
-    def _position_metres(self, normalized: torch.Tensor) -> torch.Tensor:
-        """(..., J, 3) normalized positions of the first J joints -> metres."""
-        joints = normalized.shape[-2]
-        std = self.std[ih.POSITIONS].view(NUM_JOINTS, 3)[:joints]
-        mean = self.mean[ih.POSITIONS].view(NUM_JOINTS, 3)[:joints]
-        return normalized * std + mean
+    def _position_statistics(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(22, 3) mean and std of the joint positions, in metres."""
+        return (
+            self.mean[ih.POSITIONS].view(NUM_JOINTS, 3),
+            self.std[ih.POSITIONS].view(NUM_JOINTS, 3),
+        )
 
     def reconstruction_mask(self, device: torch.device) -> torch.Tensor:
         """(262,) bool: the dims the reconstruction loss covers (all but the 4 contacts)."""
