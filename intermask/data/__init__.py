@@ -11,6 +11,8 @@ from intermask.data.interhuman import InterHumanDataset
 from intermask.data.interx import InterXDataset
 from intermask.data.item import ExportedItem, export_item, load_item
 from intermask.data.normalization import Normalizer, default_stats_dir
+from intermask.data.reader import ClipReader
+from intermask.data.readers import READERS, reader_class
 from intermask.data.statistics import compute_and_save_stats
 from intermask.data.validation import CheckReport, check_dataset, check_dataset_report
 from intermask.data.windows import WindowIndex, build_window_index, window_count
@@ -26,7 +28,9 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "READERS",
     "CheckReport",
+    "ClipReader",
     "DataError",
     "DataProblem",
     "EpochSampler",
@@ -45,6 +49,7 @@ __all__ = [
     "export_item",
     "item_rng",
     "load_item",
+    "reader_class",
     "swap_left_right",
     "window_count",
 ]

@@ -28,14 +28,6 @@ ItemKey = int | tuple[int, int]
 META_FILE = "interaction_meta.json"
 
 
-def check_item_options(*, mode: str, window_persons: int) -> None:
-    """The options every reader shares: item mode and persons per VQ window."""
-    if mode not in ("interaction", "window"):
-        raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
-    if window_persons not in (1, 2):
-        raise ValueError(f"window_persons must be 1 or 2, got {window_persons}")
-
-
 def read_id_list(path: Path, *, what: str) -> list[str]:
     """Ids from a split / ignore file: one per line, stripped, blanks dropped, order kept.
 

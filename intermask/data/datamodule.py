@@ -15,29 +15,29 @@ from pathlib import Path
 from typing import Literal
 
 from lightning import LightningDataModule
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import DataLoader
 
 from intermask.data.common import EpochSampler
 from intermask.data.errors import DataError
-from intermask.data.interhuman import InterHumanDataset
-from intermask.data.interx import FEATURE_SHAPE as INTERX_FEATURE_SHAPE
-from intermask.data.interx import InterXDataset
 from intermask.data.normalization import Normalizer, default_stats_dir, stats_exist
+from intermask.data.reader import ClipReader, Mode
+from intermask.data.readers import reader_class
 from intermask.data.statistics import compute_and_save_stats
-from intermask.motion.interhuman import FEATURE_DIM
-from intermask.motion.kinds import DatasetKind, check_dataset_kind
+from intermask.motion.kinds import DatasetKind
 
 log = logging.getLogger(__name__)
 
-Mode = Literal["interaction", "window"]
 Split = Literal["train", "val", "test"]
-DEFAULT_MAX_LENGTH = {"interhuman": 300, "interx": 150}  # frames (InterGen / InterMask settings)
-DEFAULT_MIN_LENGTH = {"interhuman": 15, "interx": 24}
 
 
 class InteractionDataModule(LightningDataModule):
     """Train/val/test loaders for one dataset folder.
 
+    dataset: the dataset kind (the features every model and metric downstream expects).
+    reader: the :class:`~intermask.data.reader.ClipReader` that reads ``root``, as a class or a
+        dotted import path; None = the framework's reader of ``dataset``
+        (:mod:`intermask.data.readers`). Its class attributes give the defaults below.
+    max_length, min_length: None = the reader's defaults (InterHuman 300 / 15, Inter-X 150 / 24).
     normalize: None = dataset default (InterHuman yes, Inter-X no, as in the reference).
     swap_persons: None = dataset default (InterHuman yes in every split, Inter-X no).
     mirror: mirrored copies in the training split only (InterHuman only).
@@ -53,6 +53,7 @@ class InteractionDataModule(LightningDataModule):
         *,
         dataset: DatasetKind,
         root: str,
+        reader: str | type[ClipReader] | None = None,
         mode: Mode = "interaction",
         batch_size: int = 32,
         eval_batch_size: int | None = None,
@@ -77,7 +78,7 @@ class InteractionDataModule(LightningDataModule):
         synthetic_seed: int = 0,
     ):
         super().__init__()
-        check_dataset_kind(dataset)
+        self.reader = reader_class(dataset, reader)
         if mode not in ("interaction", "window"):
             raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
         if batch_size < 1:
@@ -89,28 +90,32 @@ class InteractionDataModule(LightningDataModule):
         self.num_workers, self.pin_memory = num_workers, pin_memory
         self.persistent_workers = persistent_workers and num_workers > 0
         self.drop_last = drop_last
-        self.max_length = max_length or DEFAULT_MAX_LENGTH[dataset]
-        self.min_length = min_length or DEFAULT_MIN_LENGTH[dataset]
+        self.max_length = max_length or self.reader.default_max_length
+        self.min_length = min_length or self.reader.default_min_length
         self.window, self.stride, self.window_persons = window, stride, window_persons
         # Inter-X has no mirror augmentation in the reference (no left/right caption tokens to
         # swap in its POS-tagged texts); the flag is ignored there, loudly.
-        self.mirror = mirror and dataset == "interhuman"
-        if mirror and dataset == "interx":
-            log.info("mirror augmentation is InterHuman only; Inter-X trains without it")
-        self.swap_persons = swap_persons if swap_persons is not None else dataset == "interhuman"
-        self.normalize = normalize if normalize is not None else dataset == "interhuman"
+        self.mirror = mirror and self.reader.supports_mirror
+        if mirror and not self.reader.supports_mirror:
+            log.info(
+                "%s has no mirror augmentation; training runs without it", self.reader.__name__
+            )
+        self.swap_persons = (
+            self.reader.default_swap_persons if swap_persons is None else swap_persons
+        )
+        self.normalize = self.reader.default_normalize if normalize is None else normalize
         self.stats_dir = Path(stats_dir) if stats_dir else default_stats_dir(root)
         self.compute_stats = compute_stats
         self.seed, self.eval_shuffle = seed, eval_shuffle
         self.synthesize_if_missing = synthesize_if_missing
         self.synthetic_clips, self.synthetic_seed = synthetic_clips, synthetic_seed
         self.normalizer: Normalizer | None = None
-        self.datasets: dict[str, Dataset] = {}
+        self.datasets: dict[str, ClipReader] = {}
 
     @property
     def feature_shape(self) -> tuple[int, ...]:
         """Per-person, per-frame feature shape: (262,) or (56, 6)."""
-        return (FEATURE_DIM,) if self.dataset == "interhuman" else INTERX_FEATURE_SHAPE
+        return self.reader.feature_shape
 
     # ------------------------------------------------------------------ preparation
 
@@ -144,7 +149,11 @@ class InteractionDataModule(LightningDataModule):
             self.stats_dir,
         )
         compute_and_save_stats(
-            self.root, dataset=self.dataset, split="train", out_dir=self.stats_dir
+            self.root,
+            dataset=self.dataset,
+            reader=self.reader,
+            split="train",
+            out_dir=self.stats_dir,
         )
 
     def load_normalizer(self) -> Normalizer | None:
@@ -173,7 +182,7 @@ class InteractionDataModule(LightningDataModule):
             if split not in self.datasets:
                 self.datasets[split] = self.build_dataset(split)
 
-    def build_dataset(self, split: Split, *, mode: Mode | None = None) -> Dataset:
+    def build_dataset(self, split: Split, *, mode: Mode | None = None) -> ClipReader:
         """The dataset of ``split`` with this module's settings (mirroring in train only)."""
         common = dict(
             root=self.root,
@@ -188,9 +197,9 @@ class InteractionDataModule(LightningDataModule):
             normalizer=self.normalizer,
             seed=self.seed,
         )
-        if self.dataset == "interhuman":
-            return InterHumanDataset(mirror=self.mirror and split == "train", **common)
-        return InterXDataset(**common)
+        if self.reader.supports_mirror:
+            common["mirror"] = self.mirror and split == "train"
+        return self.reader(**common)
 
     # ------------------------------------------------------------------ loaders
 

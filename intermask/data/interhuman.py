@@ -24,31 +24,26 @@ Item modes:
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
 from einops import rearrange
-from torch.utils.data import Dataset
 
 from intermask.data.captions import swap_left_right
 from intermask.data.common import (
     ClipMeta,
-    ItemKey,
-    check_item_options,
-    item_rng,
-    log_skipped,
     read_caption_lines,
     read_id_list,
     read_interaction_meta,
     single_threaded,
-    split_key,
 )
 from intermask.data.errors import DataError, SkippedClip
 from intermask.data.normalization import Normalizer
-from intermask.data.windows import build_window_index
+from intermask.data.reader import ClipReader, Mode
 from intermask.motion.interhuman import (
     FEATURE_DIM,
     RAW_DIM,
@@ -57,7 +52,6 @@ from intermask.motion.interhuman import (
     interaction_features,
 )
 
-Mode = Literal["interaction", "window"]
 SPLITS = ("train", "val", "test")
 BODY_DIM = 192  # 22 positions x 3 + 21 rotations x 6
 IGNORE_FILE = "ignore_list.txt"
@@ -145,7 +139,7 @@ def body_to_raw(body: torch.Tensor) -> torch.Tensor:
     return raw
 
 
-class InterHumanDataset(Dataset):
+class InterHumanDataset(ClipReader):
     """InterHuman clips of one split (see the module docstring for the item layout).
 
     Augmentation, as in the reference loaders: captions drawn at random; clips longer than
@@ -157,7 +151,13 @@ class InterHumanDataset(Dataset):
     and ids on the ignore list go to ``self.skipped`` (logged), never silently.
     """
 
-    feature_dim = FEATURE_DIM
+    kind = "interhuman"
+    feature_shape = (FEATURE_DIM,)
+    default_max_length = 300  # frames (InterGen)
+    default_min_length = 15
+    default_swap_persons = True  # interactions have no person order
+    default_normalize = True
+    supports_mirror = True
 
     def __init__(
         self,
@@ -165,42 +165,43 @@ class InterHumanDataset(Dataset):
         root: str | Path,
         split: str,
         mode: Mode = "interaction",
-        max_length: int = 300,
-        min_length: int = 15,
+        max_length: int = default_max_length,
+        min_length: int = default_min_length,
         window: int = 64,
         stride: int = 10,
         window_persons: int = 1,
         mirror: bool = False,
-        swap_persons: bool = True,
+        swap_persons: bool = default_swap_persons,
         normalizer: Normalizer | None = None,
         seed: int = 3407,
         epoch: int = 0,
     ):
-        check_item_options(mode=mode, window_persons=window_persons)
-        if not 2 <= min_length <= max_length:
-            raise ValueError(
-                f"need 2 <= min_length <= max_length, got {min_length} and {max_length}"
-            )
-        if normalizer is not None and normalizer.feature_shape != (FEATURE_DIM,):
-            raise ValueError(
-                f"normalizer must have shape ({FEATURE_DIM},), got {normalizer.feature_shape}"
-            )
         self.layout = InterHumanLayout(Path(root))
-        self.split, self.mode = split, mode
-        self.max_length, self.min_length = max_length, min_length
-        self.window, self.stride, self.window_persons = window, stride, window_persons
-        self.mirror, self.swap_persons = mirror, swap_persons
-        self.normalizer, self.seed, self.epoch = normalizer, seed, epoch
-        self._load()
-        if mode == "window":
-            self._build_windows()
+        self.mirror = mirror
+        super().__init__(
+            root=root,
+            split=split,
+            mode=mode,
+            max_length=max_length,
+            min_length=min_length,
+            window=window,
+            stride=stride,
+            window_persons=window_persons,
+            swap_persons=swap_persons,
+            normalizer=normalizer,
+            seed=seed,
+            epoch=epoch,
+        )
+
+    @property
+    def split_file(self) -> Path:
+        return self.layout.split_file(self.split)
 
     # ------------------------------------------------------------------ construction
 
     def _load(self) -> None:
         check_root(self.layout.root)
-        split_path = self.layout.split_file(self.split)
-        listed = read_id_list(split_path, what=f"{self.split} split")
+        listed = read_id_list(self.split_file, what=f"{self.split} split")
         ignored = read_ignore_list(self.layout)
         meta = read_interaction_meta(self.layout.root)
         self.skipped: list[SkippedClip] = [
@@ -217,13 +218,8 @@ class InterHumanDataset(Dataset):
             captions.append(clip_captions)
             if meta is not None:
                 metas.append(_clip_meta(meta, clip_id, self.layout.root))
-        log_skipped(self.skipped, where=str(split_path))
-        if not ids:
-            raise DataError(
-                f"{split_path}: split resolves to zero clips ({len(listed)} listed, "
-                f"{len(self.skipped)} skipped: ignore list or shorter than {self.min_length} frames)"
-            )
         self.clip_ids: list[str] = ids
+        self._check_not_empty(len(listed), f"ignore list or shorter than {self.min_length} frames")
         self.captions: list[list[str]] = captions
         self.mirrored_captions = [[swap_left_right(c) for c in cs] for cs in captions]
         self.meta: list[ClipMeta] | None = metas if meta is not None else None
@@ -232,6 +228,8 @@ class InterHumanDataset(Dataset):
         self._body = np.concatenate(bodies, axis=0)  # (sum T, 2, 192)
 
     def _build_windows(self) -> None:
+        # Features depend on the whole canonical sequence, so windows are sliced from features
+        # computed once per clip (and mirror state) here, not per item.
         sequences, self._window_source = [], []
         for clip in range(len(self.clip_ids)):
             for mirrored in (False, True) if self.mirror else (False,):
@@ -246,7 +244,6 @@ class InterHumanDataset(Dataset):
         lengths = [len(s) for s in sequences]
         self._window_offsets = np.concatenate(([0], np.cumsum(lengths)))
         self._window_data = np.concatenate(sequences, axis=0)  # (sum L, 262) or (sum L, 2, 262)
-        self.windows = build_window_index(lengths, window=self.window, stride=self.stride)
         short = sorted(
             {
                 self.clip_ids[c]
@@ -254,19 +251,8 @@ class InterHumanDataset(Dataset):
                 if n < self.window
             }
         )
-        log_skipped(
-            [
-                SkippedClip(
-                    i, f"fewer than {self.window} feature frames: no {self.window}-frame window"
-                )
-                for i in short
-            ],
-            where=f"{self.layout.split_file(self.split)} (windows)",
-        )
-        if len(self.windows.start) == 0:
-            raise DataError(
-                f"{self.layout.split_file(self.split)}: no clip is long enough for a {self.window}-frame window"
-            )
+        reason = f"fewer than {self.window} feature frames: no {self.window}-frame window"
+        self._index_windows(lengths, [SkippedClip(i, reason) for i in short])
 
     # ------------------------------------------------------------------ features
 
@@ -296,26 +282,21 @@ class InterHumanDataset(Dataset):
 
     # ------------------------------------------------------------------ items
 
-    def __len__(self) -> int:
-        if self.mode == "window":
-            return len(self.windows.start)
-        return len(self.clip_ids) * (2 if self.mirror else 1)
+    def stats_sequences(self) -> Iterator[torch.Tensor]:
+        """(T-1, 2, 262) features of every clip with both choices of reference person and both
+        mirror states: the distribution training sees with person swapping and mirroring on."""
+        for clip in range(len(self.clip_ids)):
+            for swap in (False, True):
+                for mirror in (False, True):
+                    yield self.clip_features(clip, mirror=mirror, swap=swap)
 
-    def __getitem__(self, key: ItemKey) -> dict[str, Any]:
-        index, epoch = split_key(key, self.epoch)
-        if not 0 <= index < len(self):
-            raise IndexError(f"index {index} out of range for {len(self)} items")
-        with single_threaded():
-            if self.mode == "window":
-                return self._window_item(index)
-            return self._interaction_item(index, item_rng(self.seed, epoch, index))
+    def _interaction_count(self) -> int:
+        return len(self.clip_ids) * (2 if self.mirror else 1)
 
     def _window_item(self, index: int) -> dict[str, Any]:
         seq, start = int(self.windows.sequence[index]), int(self.windows.start[index])
         first = self._window_offsets[seq] + start
-        motion = torch.from_numpy(self._window_data[first : first + self.window])
-        if self.normalizer is not None:
-            motion = self.normalizer.normalize(motion)
+        motion = self._normalize(torch.from_numpy(self._window_data[first : first + self.window]))
         clip, person, mirrored = self._window_source[seq]
         return {
             "motion": motion,
@@ -346,8 +327,7 @@ class InterHumanDataset(Dataset):
         persons = [2, 1] if swap_reference else [1, 2]
         if swap_output:
             features, persons = features.flip(1), persons[::-1]
-        if self.normalizer is not None:
-            features = self.normalizer.normalize(features)
+        features = self._normalize(features)
         length = features.shape[0]
         motion = features.new_zeros(2, self.max_length, FEATURE_DIM)
         motion[:, :length] = rearrange(features, "t p c -> p t c")
@@ -373,15 +353,3 @@ def _clip_meta(meta: dict[str, ClipMeta], clip_id: str, root: Path) -> ClipMeta:
     if clip_id not in meta:
         raise DataError(f"{root / 'interaction_meta.json'}: no entry for clip {clip_id!r}")
     return meta[clip_id]
-
-
-def interhuman_stats_sequences(dataset: InterHumanDataset):
-    """Yields (T-1, 2, 262) un-normalized features of every clip, for the normalization statistics.
-
-    Both choices of reference person and both mirror states: the distribution the model trains on
-    when person swapping and mirroring are on.
-    """
-    for clip in range(len(dataset.clip_ids)):
-        for swap in (False, True):
-            for mirror in (False, True):
-                yield dataset.clip_features(clip, mirror=mirror, swap=swap)

@@ -22,6 +22,7 @@ the crop anywhere in the clip.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -30,27 +31,20 @@ import h5py
 import numpy as np
 import torch
 from einops import rearrange
-from torch.utils.data import Dataset
 
 from intermask.data.common import (
-    ItemKey,
-    check_item_options,
     check_motion_array,
-    item_rng,
-    log_skipped,
     read_caption_lines,
     read_id_list,
     read_interaction_meta,
     single_threaded,
-    split_key,
 )
 from intermask.data.errors import DataError, SkippedClip
 from intermask.data.normalization import Normalizer
-from intermask.data.windows import build_window_index
+from intermask.data.reader import ClipReader, Mode
 from intermask.motion.interx import NUM_ROWS, RAW_CHANNELS, person_representation, split_persons
 from intermask.utils.plain_pickle import UnsafePickle, load_plain_pickle
 
-Mode = Literal["interaction", "window"]
 Crop = Literal["random", "start"]
 FEATURE_SHAPE = (NUM_ROWS, RAW_CHANNELS)  # (56, 6) per person
 NAME_PATTERN = re.compile(r"^G(\d{3})T(\d{3})A(\d{3})R(\d{3})$")
@@ -143,7 +137,7 @@ def person_features(raw: torch.Tensor) -> torch.Tensor:
     return person_representation(axis_angle)
 
 
-class InterXDataset(Dataset):
+class InterXDataset(ClipReader):
     """Inter-X clips of one split; items mirror ``InterHumanDataset`` with motion (2, max_length, 56, 6).
 
     Interaction items: {"motion", "length", "caption", "tokens", "id", "persons", "start" (crop
@@ -154,7 +148,12 @@ class InterXDataset(Dataset):
     No mirroring (the reference has none for Inter-X).
     """
 
+    kind = "interx"
     feature_shape = FEATURE_SHAPE
+    default_max_length = 150  # frames (InterMask's Inter-X setting)
+    default_min_length = 24  # the reference's length rule (module docstring)
+    default_swap_persons = False  # Inter-X keeps its annotated person order
+    default_normalize = False  # the reference trains on the raw representation
 
     def __init__(
         self,
@@ -162,8 +161,8 @@ class InterXDataset(Dataset):
         root: str | Path,
         split: str,
         mode: Mode = "interaction",
-        max_length: int = 150,
-        min_length: int = 24,
+        max_length: int = default_max_length,
+        min_length: int = default_min_length,
         max_frames: int = 1000,
         unit_length: int = 4,
         length_jitter: bool = True,
@@ -171,40 +170,45 @@ class InterXDataset(Dataset):
         window: int = 64,
         window_persons: int = 1,
         stride: int = 10,
-        swap_persons: bool = False,
+        swap_persons: bool = default_swap_persons,
         normalizer: Normalizer | None = None,
         seed: int = 3407,
         epoch: int = 0,
     ):
-        check_item_options(mode=mode, window_persons=window_persons)
         if crop not in ("random", "start"):
             raise ValueError(f"crop must be 'random' or 'start', got {crop!r}")
         if not (unit_length >= 1 and 2 * unit_length <= min_length and unit_length <= max_length):
             raise ValueError(
                 f"need 1 <= unit_length, 2 * unit_length <= min_length ({min_length}), got {unit_length}"
             )
-        if normalizer is not None and normalizer.feature_shape != FEATURE_SHAPE:
-            raise ValueError(
-                f"normalizer must have shape {FEATURE_SHAPE}, got {normalizer.feature_shape}"
-            )
         self.layout = InterXLayout(Path(root))
-        self.split, self.mode, self.crop = split, mode, crop
-        self.max_length, self.min_length, self.max_frames = max_length, min_length, max_frames
+        self.crop, self.max_frames = crop, max_frames
         self.unit_length, self.length_jitter = unit_length, length_jitter
-        self.window, self.stride, self.window_persons = window, stride, window_persons
-        self.swap_persons, self.normalizer = swap_persons, normalizer
-        self.seed, self.epoch = seed, epoch
-        self._load()
-        if mode == "window":
-            self._build_windows()
+        super().__init__(
+            root=root,
+            split=split,
+            mode=mode,
+            max_length=max_length,
+            min_length=min_length,
+            window=window,
+            stride=stride,
+            window_persons=window_persons,
+            swap_persons=swap_persons,
+            normalizer=normalizer,
+            seed=seed,
+            epoch=epoch,
+        )
+
+    @property
+    def split_file(self) -> Path:
+        return self.layout.split_file(self.split)
 
     def _load(self) -> None:
         if not self.layout.root.is_dir():
             raise DataError(
                 f"{self.layout.root}: dataset root not found (expected the Inter-X folder)"
             )
-        split_path = self.layout.split_file(self.split)
-        listed = read_id_list(split_path, what=f"{self.split} split")
+        listed = read_id_list(self.split_file, what=f"{self.split} split")
         h5_path = self.layout.motion_file(self.split)
         self.skipped: list[SkippedClip] = []
         ids, motions, captions = [], [], []
@@ -218,13 +222,8 @@ class InterXDataset(Dataset):
                 captions.append(read_captions(self.layout.caption_file(name)))
                 ids.append(name)
                 motions.append(motion)
-        log_skipped(self.skipped, where=str(split_path))
-        if not ids:
-            raise DataError(
-                f"{split_path}: split resolves to zero clips ({len(listed)} listed, {len(self.skipped)} "
-                f"skipped for length outside [{self.min_length}, {self.max_frames}))"
-            )
         self.clip_ids: list[str] = ids
+        self._check_not_empty(len(listed), f"length outside [{self.min_length}, {self.max_frames})")
         self.captions: list[list[Caption]] = captions
         self.frames = np.array([len(m) for m in motions], dtype=np.int64)
         self._offsets = np.concatenate(([0], np.cumsum(self.frames)))
@@ -260,20 +259,16 @@ class InterXDataset(Dataset):
             self.actors = [order[n] + 1 for n in self.clip_ids]
 
     def _build_windows(self) -> None:
-        # single-person windows: sequence P c + p is person p of clip c; two-person: P = 1
+        # Sequence P c + p is person p of clip c (P = 2), or clip c itself with two-person
+        # windows (P = 1); features are computed per item from the stored release rows.
         per_clip = 1 if self.window_persons == 2 else 2
         lengths = [int(n) for n in self.frames for _ in range(per_clip)]
-        self.windows = build_window_index(lengths, window=self.window, stride=self.stride)
         short = [
             SkippedClip(i, f"fewer than {self.window} frames")
             for i, n in zip(self.clip_ids, self.frames, strict=True)
             if n < self.window
         ]
-        log_skipped(short, where=f"{self.layout.split_file(self.split)} (windows)")
-        if len(self.windows.start) == 0:
-            raise DataError(
-                f"{self.layout.split_file(self.split)}: no clip is long enough for a {self.window}-frame window"
-            )
+        self._index_windows(lengths, short)
 
     def clip_raw(self, clip: int) -> torch.Tensor:
         """(T, 56, 6) release rows of a clip."""
@@ -288,20 +283,13 @@ class InterXDataset(Dataset):
         with single_threaded():
             return person_features(raw[start:stop])
 
-    def __len__(self) -> int:
-        return len(self.windows.start) if self.mode == "window" else len(self.clip_ids)
+    def stats_sequences(self) -> Iterator[torch.Tensor]:
+        """(2, T, 56, 6) representations of every whole clip, for optional statistics."""
+        for clip in range(len(self.clip_ids)):
+            yield self.clip_features(clip)
 
-    def __getitem__(self, key: ItemKey) -> dict[str, Any]:
-        index, epoch = split_key(key, self.epoch)
-        if not 0 <= index < len(self):
-            raise IndexError(f"index {index} out of range for {len(self)} items")
-        with single_threaded():
-            if self.mode == "window":
-                return self._window_item(index)
-            return self._interaction_item(index, item_rng(self.seed, epoch, index))
-
-    def _normalize(self, motion: torch.Tensor) -> torch.Tensor:
-        return motion if self.normalizer is None else self.normalizer.normalize(motion)
+    def _interaction_count(self) -> int:
+        return len(self.clip_ids)
 
     def _window_item(self, index: int) -> dict[str, Any]:
         seq, start = int(self.windows.sequence[index]), int(self.windows.start[index])
@@ -355,9 +343,3 @@ class InterXDataset(Dataset):
         if self.actors is not None:
             item["actor"] = persons.index(self.actors[index]) + 1
         return item
-
-
-def interx_stats_sequences(dataset: InterXDataset):
-    """Yields (2, T, 56, 6) representations of every whole clip, for optional statistics."""
-    for clip in range(len(dataset.clip_ids)):
-        yield dataset.clip_features(clip)

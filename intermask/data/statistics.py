@@ -5,20 +5,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from intermask.data.interhuman import InterHumanDataset, interhuman_stats_sequences
-from intermask.data.interx import InterXDataset, interx_stats_sequences
 from intermask.data.normalization import (
     Normalizer,
     compute_normalizer,
     default_stats_dir,
 )
-from intermask.motion.kinds import DatasetKind, check_dataset_kind
+from intermask.data.reader import ClipReader
+from intermask.data.readers import reader_class
+from intermask.motion.kinds import DatasetKind
 
 
 def compute_and_save_stats(
     root: str | Path,
     *,
     dataset: DatasetKind,
+    reader: str | type[ClipReader] | None = None,
     split: str = "train",
     out_dir: str | Path | None = None,
     min_std: float = 1e-3,
@@ -27,17 +28,13 @@ def compute_and_save_stats(
 
     InterHuman: canonicalized full training clips, both persons (person 2 in person 1's frame),
     both choices of reference person and their mirrored copies. Inter-X: the (56, 6) person
-    representation of both persons. Saved to ``out_dir`` (default ``<root>/stats``).
+    representation of both persons (each reader's ``stats_sequences``). Saved to ``out_dir``
+    (default ``<root>/stats``).
     """
-    if check_dataset_kind(dataset) == "interhuman":
-        ds = InterHumanDataset(
-            root=root, split=split, mode="interaction", mirror=False, swap_persons=False
-        )
-        sequences, shape = interhuman_stats_sequences(ds), (ds.feature_dim,)
-    else:
-        ds = InterXDataset(root=root, split=split, mode="interaction", swap_persons=False)
-        sequences, shape = interx_stats_sequences(ds), ds.feature_shape
-    normalizer, info = compute_normalizer(sequences, feature_shape=shape, min_std=min_std)
+    ds = reader_class(dataset, reader).for_statistics(root, split)
+    normalizer, info = compute_normalizer(
+        ds.stats_sequences(), feature_shape=ds.feature_shape, min_std=min_std
+    )
     info.update(
         {
             "dataset": dataset,

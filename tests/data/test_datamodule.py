@@ -8,6 +8,8 @@ from builders import write_interhuman, write_interx
 
 from intermask.data.datamodule import InteractionDataModule
 from intermask.data.errors import DataError
+from intermask.data.interhuman import InterHumanDataset
+from intermask.data.interx import InterXDataset
 
 IH_SPLITS = {"train": (40, 80, 320, 90, 70), "val": (30, 60, 400), "test": (50, 310, 45)}
 
@@ -133,6 +135,71 @@ def test_invalid_arguments(ih_root):
         make(ih_root, dataset="synthetic")
     with pytest.raises(ValueError, match="mode must be"):
         make(ih_root, mode="pairs")
+
+
+class RecordingReader(InterHumanDataset):
+    """The InterHuman reader, recording every construction (split, mode, mirror, swap)."""
+
+    built: list[tuple[str, str, bool, bool]] = []
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        RecordingReader.built.append((self.split, self.mode, self.mirror, self.swap_persons))
+
+
+def test_an_injected_reader_serves_every_split_and_the_statistics(ih_root, tmp_path):
+    RecordingReader.built.clear()
+    dm = make(ih_root, reader=RecordingReader, stats_dir=str(tmp_path / "stats"))
+    dm.prepare_data()  # statistics missing: computed by the injected reader, augmentation off
+    assert RecordingReader.built == [("train", "interaction", False, False)]
+    dm.setup("fit")
+    assert RecordingReader.built[1:] == [
+        ("train", "interaction", True, True),  # mirrored copies in train only
+        ("val", "interaction", False, True),
+    ]
+    assert type(dm.datasets["val"]) is RecordingReader and len(dm.datasets["train"]) == 10
+
+
+def test_reader_defaults_come_from_the_reader_class(ih_root, ix_root):
+    ih, ix = (
+        make(ih_root),
+        make(ix_root, dataset="interx", reader="intermask.data.interx.InterXDataset"),
+    )
+    assert ih.reader is InterHumanDataset and ix.reader is InterXDataset
+    assert (ih.max_length, ih.min_length, ih.swap_persons, ih.normalize, ih.mirror) == (
+        300,
+        15,
+        True,
+        True,
+        True,
+    )
+    assert (ix.max_length, ix.min_length, ix.swap_persons, ix.normalize, ix.mirror) == (
+        150,
+        24,
+        False,
+        False,
+        False,
+    )
+    assert (ih.feature_shape, ix.feature_shape) == ((262,), (56, 6))
+
+
+def test_an_injected_reader_is_checked(ih_root):
+    with pytest.raises(
+        ValueError,
+        match=r"reader intermask.data.interx.InterXDataset reads 'interx' features, but the "
+        r"dataset kind is 'interhuman': set data.dataset=interx",
+    ):
+        make(ih_root, reader="intermask.data.interx.InterXDataset")
+    with pytest.raises(
+        TypeError,
+        match=r"reader 'intermask.data.common.EpochSampler' is not a subclass of "
+        r"intermask.data.reader.ClipReader",
+    ):
+        make(ih_root, reader="intermask.data.common.EpochSampler")
+    with pytest.raises(ValueError, match=r"reader 'nowhere.Reader' cannot be imported \(No module"):
+        make(ih_root, reader="nowhere.Reader")
+    with pytest.raises(ValueError, match=r"dotted path 'package.module.Class', got 'Reader'"):
+        make(ih_root, reader="Reader")
 
 
 def test_synthesize_if_missing_calls_the_generator(tmp_path, monkeypatch):
