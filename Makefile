@@ -17,7 +17,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo overfit tb clean checkpoints
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo overfit bench tb clean checkpoints
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -115,6 +115,9 @@ OVERFIT_DIR ?= outputs/overfit
 
 overfit: install ## memorisation check: VQ-VAE + Inter-M on 14 clips (one per action), then all 14 captions must succeed
 	$(PY) -m intermask.overfit --out $(OVERFIT_DIR) $(ARGS)
+
+bench: install ## speed of the hot paths against this machine's measured peak: make bench [ARGS="--threads 1 --size demo"]
+	$(PY) -m intermask.bench $(ARGS)
 
 tb: install ## TensorBoard over all runs: make tb [LOGDIR=outputs]
 	$(VENV)/bin/tensorboard --logdir $(or $(LOGDIR),outputs) --bind_all

@@ -3,6 +3,7 @@ results written as JSON / Markdown / TensorBoard, and the generate command on th
 
 from __future__ import annotations
 
+import inspect
 import json
 from pathlib import Path
 
@@ -207,6 +208,30 @@ def test_captions_sharing_a_prefix_or_repeated_get_their_own_folders(runs, tmp_p
     assert folders == [f"two_people_stand_face_to_face_and_then_o_{c:02d}-00" for c in range(3)]
     recorded = [json.loads((tmp_path / f / "sample.json").read_text())["caption"] for f in folders]
     assert recorded == captions
+
+
+def test_the_generate_command_reaches_the_logits_through_each_module_once(
+    runs, tmp_path, monkeypatch
+):
+    from intermask.interm.model import InterMTransformer
+
+    paths, forward = [], InterMTransformer.forward
+
+    def recording_forward(self, *args, **kwargs):
+        paths.append([Path(f.filename) for f in reversed(inspect.stack())])  # outermost first
+        return forward(self, *args, **kwargs)
+
+    monkeypatch.setattr(InterMTransformer, "forward", recording_forward)
+    code = cli(
+        ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
+        + ["--iterations", "1", "--no-render", "--out", str(tmp_path)]
+    )
+    assert code == 0 and paths
+    package = Path(inspect.getfile(InterMTransformer)).parents[1]
+    for stack in paths:
+        modules = [p.relative_to(package).as_posix() for p in stack if p.is_relative_to(package)]
+        visits = [m for i, m in enumerate(modules) if i == 0 or modules[i - 1] != m]
+        assert visits == ["cli.py", "generate.py", "interm/sampler.py", "interm/model.py"]
 
 
 def test_the_generate_job_runs_from_python_as_from_the_command_line(runs, tmp_path):

@@ -23,7 +23,7 @@ STAGES = [
     ["evaluator", "reaction", "render"],
     ["evaluation"],
     ["train", "generate"],
-    ["evaluate", "overfit"],
+    ["evaluate", "overfit", "bench"],
     ["cli", "<package>"],
 ]
 RANK = {name: level for level, names in enumerate(STAGES) for name in names}

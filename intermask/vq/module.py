@@ -87,6 +87,12 @@ class VQVAEModule(ScheduledModule):
     def forward(self, features: torch.Tensor) -> torch.Tensor:
         return self.net(features).reconstruction
 
+    def compute_losses(
+        self, batch: dict[str, Any], *, generator: torch.Generator | None = None
+    ) -> LossTerms:
+        """The loss terms a training step minimises on ``batch`` (no logging, no trainer)."""
+        return self._step(batch, measure_unweighted=False, generator=generator)[0]
+
     def _step(
         self,
         batch: dict[str, Any],
