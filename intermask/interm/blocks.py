@@ -15,8 +15,13 @@ from intermask.interm.attention import MultiHeadAttention, SpatioTemporalAttenti
 
 
 def modulate(x: torch.Tensor, shift: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
-    """(B, S, D) tokens, (B, D) shift and scale -> x * (1 + scale) + shift."""
-    return x * (1 + scale[:, None, :]) + shift[:, None, :]
+    """(B, S, D) tokens, (B, D) shift and scale -> x * (1 + scale) + shift, in one pass."""
+    return torch.addcmul(shift[:, None, :], x, 1 + scale[:, None, :])
+
+
+def gated(x: torch.Tensor, gate: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+    """(B, S, D) residual, (B, D) gate, (B, S, D) branch -> x + gate * h, in one pass."""
+    return torch.addcmul(x, gate[:, None, :], h)
 
 
 def adaptive_norm(width: int) -> nn.LayerNorm:
@@ -53,7 +58,7 @@ class SelfAttentionLayer(nn.Module):
     def forward(self, x: torch.Tensor, c: torch.Tensor, padding: torch.Tensor) -> torch.Tensor:
         shift, scale, gate = self.modulation(c)
         h = self.attention(modulate(self.norm(x), shift, scale), key_padding_mask=padding)
-        return x + gate[:, None, :] * self.dropout(h)
+        return gated(x, gate, self.dropout(h))
 
 
 class FeedForwardLayer(nn.Module):
@@ -70,7 +75,7 @@ class FeedForwardLayer(nn.Module):
 
     def forward(self, x: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
         shift, scale, gate = self.modulation(c)
-        return x + gate[:, None, :] * self.dropout(self.net(modulate(self.norm(x), shift, scale)))
+        return gated(x, gate, self.dropout(self.net(modulate(self.norm(x), shift, scale))))
 
 
 class SpatioTemporalLayer(nn.Module):
@@ -103,11 +108,8 @@ class SpatioTemporalLayer(nn.Module):
             rows=rows,
         )
         residual = 2 * x if self.double_residual_quirk else x
-        return (
-            residual
-            + gate_s[:, None, :] * self.dropout(out.spatial)
-            + gate_t[:, None, :] * self.dropout(out.temporal)
-        )
+        spatial = gated(residual, gate_s, self.dropout(out.spatial))
+        return gated(spatial, gate_t, self.dropout(out.temporal))
 
 
 class CrossAttentionLayer(nn.Module):
@@ -134,7 +136,7 @@ class CrossAttentionLayer(nn.Module):
             modulate(self.context_norm(context), shift_ctx, scale_ctx),
             key_padding_mask=context_padding,
         )
-        return x + gate[:, None, :] * self.dropout(h)
+        return gated(x, gate, self.dropout(h))
 
 
 class InterMBlock(nn.Module):
