@@ -108,10 +108,14 @@ def _sync(device: torch.device) -> None:
         torch.cuda.synchronize(device)
 
 
-def _timed(fn: Callable[[], Any], device: torch.device, repeats: int) -> tuple[float, float]:
-    """(wall, CPU) seconds per call: medians of ``repeats`` calls after one warm-up call."""
-    fn()
-    _sync(device)
+def _timed(
+    fn: Callable[[], Any], device: torch.device, repeats: int, *, warm: bool = False
+) -> tuple[float, float]:
+    """(wall, CPU) seconds per call: medians of ``repeats`` calls after one warm-up call
+    (none when ``warm``: the caller has just run ``fn``)."""
+    if not warm:
+        fn()
+        _sync(device)
     walls, cpus = [], []
     for _ in range(repeats):
         wall, cpu = time.perf_counter(), time.process_time()
@@ -293,7 +297,7 @@ def bench(
 
         with FlopCounterMode(display=False) as counter:
             interaction()
-        wall, cpu = _timed(interaction, dev, max(1, repeats // 2))
+        wall, cpu = _timed(interaction, dev, max(1, repeats // 2), warm=True)
         rows.append(
             Row(
                 "interaction",
@@ -330,7 +334,7 @@ def bench(
 
     train_step()  # the optimizer's state exists before memory is measured
     with PeakMemory(dev) as memory:
-        wall, cpu = _timed(train_step, dev, repeats)
+        wall, cpu = _timed(train_step, dev, repeats, warm=True)
     add(
         Row(
             "interm_train_step", str(dev), threads, train_batch, wall, cpu, wall / train_batch,
@@ -353,7 +357,7 @@ def bench(
     vq.requires_grad_(True)
     vq_step()
     with PeakMemory(dev) as memory:
-        wall, cpu = _timed(vq_step, dev, repeats)
+        wall, cpu = _timed(vq_step, dev, repeats, warm=True)
     add(
         Row(
             "vq_train_step", str(dev), threads, vq_batch, wall, cpu, wall / vq_batch,
