@@ -96,6 +96,7 @@ eval: install ## the 20-replication protocol: make eval [GEN_CKPT=run] [EVAL_CKP
 
 DEMO_DIR ?= outputs/demo
 DEMO_PROMPTS := --text "two people shake hands" --text "one person pushes the other"
+# samples as long as the crops gen_demo trains on (96 frames): 4 s would ask it to extrapolate
 
 demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator, VQ-VAE, generator, protocol, samples (replaces DEMO_DIR)
 	rm -rf $(DEMO_DIR)
@@ -105,7 +106,7 @@ demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator,
 		vq_ckpt=$(DEMO_DIR)/vq/checkpoints/last.ckpt
 	$(PY) -m intermask.evaluate experiment=eval_demo hydra.run.dir=$(DEMO_DIR)/eval gen_ckpt=$(DEMO_DIR)/gen \
 		eval_ckpt=$$(ls $(DEMO_DIR)/evaluator/checkpoints/best*.ckpt | head -n 1)
-	$(VENV)/bin/intermask generate --checkpoint $(DEMO_DIR)/gen $(DEMO_PROMPTS) --seconds 4 --samples 2 \
+	$(VENV)/bin/intermask generate --checkpoint $(DEMO_DIR)/gen $(DEMO_PROMPTS) --seconds 3.2 --samples 2 \
 		--out $(DEMO_DIR)/samples
 	@echo; cat $(DEMO_DIR)/eval/results.md
 	@echo; echo "demo done: table $(DEMO_DIR)/eval/results.md; checkpoints $(DEMO_DIR)/{evaluator,vq,gen}/checkpoints;" \

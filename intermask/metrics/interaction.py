@@ -63,6 +63,7 @@ class SuccessThresholds:
     run: float = 1.54  # chaser's and fleer's travel in the chase direction; q01 2.07
     escape: float = 0.94  # the fleer is never closer to the chaser than this; q01 1.26
     pat_reach: float = 0.26  # a wrist to the partner's shoulder joint, both ways; q99 .185, .200
+    spacing: float = 0.24  # pelvis distance throughout, every action; q01 .331 hug, .447 pat, .711 handshake
     # Definitions, not measured (success_stats.UNMEASURED):
     fps: float = 30.0  # frame rate of the motion (both datasets' protocols run at 30 fps)
     moving_speed: float = 0.1  # m/s: a joint faster than this moves (idle sway stays below 0.06)
@@ -106,9 +107,12 @@ def _below(signal: str, threshold: str) -> Check:
 
 
 _ORDER = _above("lead", "lead")  # the reactor moves after the actor (every action)
+# Two bodies never stand in each other (every action): without it, two persons walking through
+# each other bring their wrists together and pass a handshake.
+_SPACED = _above("spacing", "spacing")
 _TOUCH = (_below("hand_gap", "hand_gap"), _above("arrival_lead", "lead"))
 _APART = _above("min_distance", "apart")
-CHECKS: dict[str, tuple[Check, ...]] = {
+_CHECKS: dict[str, tuple[Check, ...]] = {
     "handshake": (*_TOUCH, _below("contact_height", "low_contact")),
     "hug": (_below("hug_reach", "hug_reach"), _below("hug_distance", "hug_distance"), _ORDER),
     "push": (_below("push_reach", "push_reach"), _above("recoil", "push_recoil"), _ORDER),
@@ -155,6 +159,9 @@ CHECKS: dict[str, tuple[Check, ...]] = {
         _above("approach", "walked"),
         _ORDER,
     ),
+}
+CHECKS: dict[str, tuple[Check, ...]] = {
+    action: (*checks, _SPACED) for action, checks in _CHECKS.items()
 }
 
 
@@ -345,6 +352,7 @@ def measure(
     pair = Pair(joints, actor, fps=thresholds.fps, moving_speed=thresholds.moving_speed)
     signals = _signals(pair, action, thresholds)
     signals["lead"] = (pair.onset(pair.r) - pair.onset(pair.a)) / thresholds.fps
+    signals["spacing"] = float(pair.distance().min())
     return signals
 
 

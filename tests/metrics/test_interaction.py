@@ -74,6 +74,20 @@ def test_contact_actions_fail_three_metres_apart(clips, action):
     assert not passes(apart, action=action, actor=actor, thresholds=THRESHOLDS)
 
 
+@pytest.mark.parametrize("action", ACTIONS)
+def test_every_action_fails_when_the_bodies_pass_through_each_other(clips, action):
+    joints, actor = clips[action]
+    start = float((joints[0, 0, 0] - joints[0, 1, 0])[[0, 2]].norm())
+    inside = _moved_away(joints, actor, 0.05 - start)  # pelvises 5 cm apart at frame 0
+    pelvis = inside[:, :, 0][..., [0, 2]]
+    closest = float((pelvis[:, 0] - pelvis[:, 1]).norm(dim=-1).min())
+    signals = measure(inside, action=action, actor=actor, thresholds=THRESHOLDS)
+    assert signals["spacing"] == pytest.approx(closest) and closest <= 0.05 + 1e-9
+    failing = [c.signal for c in CHECKS[action] if not c.passes(signals, THRESHOLDS)]
+    assert "spacing" in failing
+    assert not passes(inside, action=action, actor=None, thresholds=THRESHOLDS)
+
+
 @pytest.mark.parametrize("action", ["wave", "bow", "dance"])
 def test_distant_actions_fail_when_the_pair_stands_too_close(clips, action):
     joints, actor = clips[action]
