@@ -215,13 +215,13 @@ def test_the_generate_command_reaches_the_logits_through_each_module_once(
 ):
     from intermask.interm.model import InterMTransformer
 
-    paths, forward = [], InterMTransformer.forward
+    paths, forward = [], InterMTransformer.forward_with_condition
 
     def recording_forward(self, *args, **kwargs):
         paths.append([Path(f.filename) for f in reversed(inspect.stack())])  # outermost first
         return forward(self, *args, **kwargs)
 
-    monkeypatch.setattr(InterMTransformer, "forward", recording_forward)
+    monkeypatch.setattr(InterMTransformer, "forward_with_condition", recording_forward)
     code = cli(
         ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
         + ["--iterations", "1", "--no-render", "--out", str(tmp_path)]
@@ -231,7 +231,8 @@ def test_the_generate_command_reaches_the_logits_through_each_module_once(
     for stack in paths:
         modules = [p.relative_to(package).as_posix() for p in stack if p.is_relative_to(package)]
         visits = [m for i, m in enumerate(modules) if i == 0 or modules[i - 1] != m]
-        assert visits == ["cli.py", "generate.py", "interm/sampler.py", "interm/model.py"]
+        # the recording stands in for interm/model.py's forward, the next and last stop
+        assert visits == ["cli.py", "generate.py", "interm/sampler.py", "interm/decoding.py"]
 
 
 def test_the_generate_job_runs_from_python_as_from_the_command_line(runs, tmp_path):

@@ -63,7 +63,7 @@ class SuccessThresholds:
     run: float = 1.54  # chaser's and fleer's travel in the chase direction; q01 2.07
     escape: float = 0.94  # the fleer is never closer to the chaser than this; q01 1.26
     pat_reach: float = 0.26  # a wrist to the partner's shoulder joint, both ways; q99 .185, .200
-    spacing: float = 0.24  # pelvis distance throughout, every action; q01 .331 hug, .447 pat, .711 handshake
+    spacing: float = 0.24  # pelvis distance throughout (every action); q01 .331 hug, .711 handshake
     # Definitions, not measured (success_stats.UNMEASURED):
     fps: float = 30.0  # frame rate of the motion (both datasets' protocols run at 30 fps)
     moving_speed: float = 0.1  # m/s: a joint faster than this moves (idle sway stays below 0.06)
