@@ -24,8 +24,8 @@ row                       what is timed
 ========================  ======================================================================
 
 Times are medians of ``repeats`` runs after a warm-up run, as wall and process CPU seconds.
-Peak memory is the resident-set high-water mark during the row minus the resident set before it
-(Linux ``/proc/self/clear_refs``; CUDA: ``max_memory_allocated``). The JSON schema is in
+Peak memory is the process's resident-set high-water mark during the row (Linux, reset through
+``/proc/self/clear_refs``; CUDA: ``max_memory_allocated``). The JSON schema is in
 ``docs/performance.md``.
 """
 
@@ -127,8 +127,9 @@ def _timed(
 
 
 class PeakMemory:
-    """Peak memory of a block above the memory in use when it starts, in MB (None where the
-    platform cannot reset its high-water mark)."""
+    """Peak memory during a block, in MB: the process's resident set on CPU (weights, optimizer
+    state and whatever the allocator keeps included), allocated memory on CUDA; None where the
+    platform cannot reset its high-water mark."""
 
     def __init__(self, device: torch.device) -> None:
         self.device, self.mb = device, None
@@ -136,16 +137,16 @@ class PeakMemory:
     def __enter__(self) -> PeakMemory:
         if self.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(self.device)
-            self.start = torch.cuda.memory_allocated(self.device)
+            self.reset = True
         else:
-            self.start = _reset_rss_peak()
+            self.reset = _reset_rss_peak()
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self.device.type == "cuda":
-            self.mb = (torch.cuda.max_memory_allocated(self.device) - self.start) / 2**20
-        elif self.start is not None:
-            self.mb = (_status_kb("VmHWM") * 1024 - self.start) / 2**20
+            self.mb = torch.cuda.max_memory_allocated(self.device) / 2**20
+        elif self.reset:
+            self.mb = _status_kb("VmHWM") / 1024
 
 
 def _status_kb(key: str) -> int:
@@ -155,13 +156,14 @@ def _status_kb(key: str) -> int:
     raise KeyError(key)
 
 
-def _reset_rss_peak() -> int | None:
-    """Reset the resident-set high-water mark to the current resident set; its bytes, or None."""
+def _reset_rss_peak() -> bool:
+    """Reset the resident-set high-water mark to the current resident set (Linux); False where
+    that is not possible."""
     try:
         Path("/proc/self/clear_refs").write_text("5")
-        return _status_kb("VmRSS") * 1024
+        return _status_kb("VmHWM") > 0
     except (OSError, KeyError):
-        return None
+        return False
 
 
 def matmul_peak(device: torch.device, size: int = 2048, repeats: int = 10) -> float:
@@ -418,7 +420,7 @@ def format_row(row: Row) -> str:
     if row.samples_per_s is not None:
         parts.append(f"{row.samples_per_s:6.2f} samples/s")
     if row.peak_memory_mb is not None:
-        parts.append(f"peak +{row.peak_memory_mb:,.0f} MB")
+        parts.append(f"peak {row.peak_memory_mb:,.0f} MB")
     if row.best:
         parts.append("best batch")
     if row.note:
