@@ -334,16 +334,17 @@ def bench(
         losses.total.backward()
         optimizer.step()
 
-    train_step()  # the optimizer's state exists before memory is measured
-    with PeakMemory(dev) as memory:
-        wall, cpu = _timed(train_step, dev, repeats, warm=True)
-    add(
-        Row(
-            "interm_train_step", str(dev), threads, train_batch, wall, cpu, wall / train_batch,
-            samples_per_s=train_batch / wall, peak_memory_mb=memory.mb,
-            note=f"step unroll {'on' if module.hparams.step_unroll else 'off'}",
-        )
-    )  # fmt: skip
+    def training_row(name: str, step: Callable[[], None], batch: int, note: str = "") -> Row:
+        step()  # the optimizer's state exists before memory is measured
+        with PeakMemory(dev) as memory:
+            wall, cpu = _timed(step, dev, repeats, warm=True)
+        return Row(
+            name, str(dev), threads, batch, wall, cpu, wall / batch,
+            samples_per_s=batch / wall, peak_memory_mb=memory.mb, note=note,
+        )  # fmt: skip
+
+    unroll = "on" if module.hparams.step_unroll else "off"
+    add(training_row("interm_train_step", train_step, train_batch, f"step unroll {unroll}"))
 
     # VQ-VAE training step and round trip
     vq_module = VQVAEModule(net=vq, optimizer=torch.optim.AdamW).to(dev).train()
@@ -357,15 +358,7 @@ def bench(
         vq_optimizer.step()
 
     vq.requires_grad_(True)
-    vq_step()
-    with PeakMemory(dev) as memory:
-        wall, cpu = _timed(vq_step, dev, repeats, warm=True)
-    add(
-        Row(
-            "vq_train_step", str(dev), threads, vq_batch, wall, cpu, wall / vq_batch,
-            samples_per_s=vq_batch / wall, peak_memory_mb=memory.mb,
-        )
-    )  # fmt: skip
+    add(training_row("vq_train_step", vq_step, vq_batch))
     vq.eval()
     window = windows[:1]
     with torch.no_grad():
