@@ -55,6 +55,7 @@ from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.interm.module import InterMModule
 from intermask.interm.sampler import decode_tokens
 from intermask.text.cache import TextFeatureCache
+from intermask.text.clip_encoder import padding_mask_from_eot
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 from intermask.vq.module import VQVAEModule
 
@@ -233,8 +234,7 @@ def _text(net: InterMTransformer, batch: int, device: torch.device) -> TextFeatu
     generator = torch.Generator().manual_seed(0)
     features = torch.randn(batch, 77, net.text_dim, generator=generator).to(device)
     eot = torch.full((batch,), 12, dtype=torch.long, device=device)
-    padding = torch.arange(77, device=device)[None, :] > eot[:, None]
-    return TextFeatures(features, eot, padding)
+    return TextFeatures(features, eot, padding_mask_from_eot(eot, 77))
 
 
 # ---------------------------------------------------------------------------------- rows
