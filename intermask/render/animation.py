@@ -4,7 +4,8 @@ GIFs are written by Pillow with one fixed palette built from the style, each fra
 exactly (PaletteMapper), so the colours stay exact in every frame (Pillow's per-frame adaptive
 palette would shift them, and its fixed-palette lookup rounds).
 MP4s go through the ffmpeg binary that ships inside the ``imageio-ffmpeg`` wheel (H.264, yuv420p;
-no system ffmpeg is needed).
+no system ffmpeg is needed). It is imported when an MP4 is written, not with this module: GIFs,
+TensorBoard samples and training never need it.
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import imageio_ffmpeg
 import numpy as np
 from PIL import Image
 
@@ -137,6 +137,13 @@ def write_mp4(
         raise ValueError(f"write_mp4: no frames to write to {path}")
     if fps <= 0:
         raise ValueError(f"write_mp4: fps must be > 0, got {fps}")
+    try:
+        import imageio_ffmpeg
+    except ImportError as error:
+        raise ImportError(
+            f"write_mp4: writing {path} needs the imageio-ffmpeg package (a dependency of this "
+            "project: `make install`, or `pip install imageio-ffmpeg`); GIFs do not need it"
+        ) from error
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     width, height = images[0].size

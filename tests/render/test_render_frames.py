@@ -137,3 +137,15 @@ def test_writers_reject_empty_input_and_mismatched_frames(tmp_path):
         ValueError, match=r"frame size \(34, 32\) differs from the first frame's \(32, 32\)"
     ):
         write_mp4(frames, tmp_path / "b.mp4", fps=20)
+
+
+def test_gifs_need_no_imageio_ffmpeg_and_mp4s_name_it_when_missing(short, tmp_path, monkeypatch):
+    """A device image without imageio-ffmpeg killed a training run at its first validation:
+    the GIF samples imported it through this module. Only the MP4 writer may need it."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # `import imageio_ffmpeg` fails
+    path = write_gif(render_frames(short[:3], size=(64, 48)), tmp_path / "a.gif", fps=20)
+    assert Image.open(path).n_frames == 3
+    with pytest.raises(ImportError, match=r"writing .*b\.mp4 needs the imageio-ffmpeg package"):
+        write_mp4([Image.new("RGB", (32, 32))], tmp_path / "b.mp4", fps=20)
