@@ -56,6 +56,7 @@ from intermask.interm.module import InterMModule
 from intermask.interm.sampler import decode_tokens
 from intermask.text.cache import TextFeatureCache
 from intermask.text.clip_encoder import padding_mask_from_eot
+from intermask.utils.precision import BF16, FP32, PrecisionChoice, resolve_precision
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 from intermask.vq.module import VQVAEModule
 
@@ -167,9 +168,15 @@ def _reset_rss_peak() -> bool:
         return False
 
 
-def matmul_peak(device: torch.device, size: int = 2048, repeats: int = 10) -> float:
-    """GFLOP/s of a dense ``size``^3 matmul: fp32 on CPU, bf16 on CUDA."""
-    dtype = torch.bfloat16 if device.type == "cuda" else torch.float32
+def matmul_peak(
+    device: torch.device,
+    size: int = 2048,
+    repeats: int = 10,
+    dtype: torch.dtype | None = None,
+) -> float:
+    """GFLOP/s of a dense ``size``^3 matmul in ``dtype`` (default: fp32 on CPU, bf16 on CUDA)."""
+    if dtype is None:
+        dtype = torch.bfloat16 if device.type == "cuda" else torch.float32
     a = torch.randn(size, size, device=device, dtype=dtype)
     b = torch.randn(size, size, device=device, dtype=dtype)
     wall, _ = _timed(lambda: a @ b, device, repeats)
@@ -250,13 +257,55 @@ def bench(
     train_batch: int = 4,
     vq_batch: int = 32,
     test_split: Path | None = Path("data/InterHuman/split/test.txt"),
+    precision: str = "auto",
     log: Callable[[str], None] = print,
 ) -> Report:
     dev = torch.device(device)
     threads = torch.get_num_threads()
-    peak = matmul_peak(dev)
-    report = Report(SCHEMA, size, machine_record(dev), peak)
-    log(f"peak: {peak:.1f} GFLOP/s ({report.machine['cpu']}, {threads} threads)")
+    choice = bench_precision(precision, dev)
+    bf16 = choice.precision == BF16
+    peak = matmul_peak(dev, dtype=torch.bfloat16 if bf16 else torch.float32)
+    report = Report(SCHEMA, size, {**machine_record(dev), "precision": choice.precision}, peak)
+    log(
+        f"peak: {peak:.1f} GFLOP/s ({report.machine['cpu']}, {threads} threads); "
+        f"precision {choice.precision} ({choice.reason})"
+    )
+    # every row runs under the precision the trainer would pick (bf16 autocast or none)
+    with torch.autocast(dev.type, dtype=torch.bfloat16, enabled=bf16):
+        _rows(
+            report, size, dev, log,
+            frames=frames, batches=batches, repeats=repeats, train_batch=train_batch,
+            vq_batch=vq_batch, test_split=test_split,
+        )  # fmt: skip
+    return report
+
+
+PRECISIONS = {"auto": "auto", "32": FP32, "bf16": BF16}
+
+
+def bench_precision(requested: str, device: torch.device) -> PrecisionChoice:
+    """``auto`` (the trainer's choice for this device: bf16 autocast on CUDA with bf16 and on
+    CPUs with native bf16, fp32 elsewhere), ``32`` or ``bf16``."""
+    if requested not in PRECISIONS:
+        raise ValueError(f"bench precision must be one of {sorted(PRECISIONS)}, got {requested!r}")
+    return resolve_precision(PRECISIONS[requested], device.type)
+
+
+def _rows(
+    report: Report,
+    size: str,
+    dev: torch.device,
+    log: Callable[[str], None],
+    *,
+    frames: int,
+    batches: tuple[int, ...],
+    repeats: int,
+    train_batch: int,
+    vq_batch: int,
+    test_split: Path | None,
+) -> None:
+    """Measure every row into ``report`` (its peak is the yardstick of ``% peak``)."""
+    threads, peak = torch.get_num_threads(), report.peak_gflops
     vq, module = build_models(size, dev)
     net = module.net.eval()
     steps = frames // FRAMES_PER_STEP
@@ -391,7 +440,6 @@ def bench(
             ),
         )
     )  # fmt: skip
-    return report
 
 
 def _test_clips(split: Path | None) -> tuple[int, str]:
@@ -439,6 +487,13 @@ def main(argv: list[str] | None = None) -> int:
         default=Path("data/InterHuman/split/test.txt"),
         help="InterHuman's test split, for the protocol's extrapolation",
     )
+    parser.add_argument(
+        "--precision",
+        choices=sorted(PRECISIONS),
+        default="auto",
+        help="auto: the trainer's choice for the device (bf16 autocast on CUDA and on CPUs with "
+        "native bf16, fp32 elsewhere)",
+    )
     parser.add_argument("--out", type=Path, default=Path("outputs/bench"))
     args = parser.parse_args(argv)
     if args.threads is not None:
@@ -452,6 +507,7 @@ def main(argv: list[str] | None = None) -> int:
         train_batch=args.train_batch,
         vq_batch=args.vq_batch,
         test_split=args.test_split,
+        precision=args.precision,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"bench_{args.size}_{report.machine['device'].replace(':', '')}_{report.machine['threads']}t.json"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
+import torch
 
 from intermask.bench import SCHEMA, main
 
@@ -67,3 +68,18 @@ def test_the_protocol_row_extrapolates_the_best_per_sample_time(report):
     assert protocol["seconds"] == pytest.approx(count * best["per_sample_seconds"])
     assert "per 1,000 clips: no InterHuman test split here" in protocol["note"]
     assert protocol["note"].startswith(f"{count} generations at 32 frames")
+
+
+def test_the_rows_run_at_the_trainers_precision_and_say_which(report):
+    from intermask.bench import bench_precision
+    from intermask.utils.precision import resolve_precision
+
+    # auto is what `trainer.precision: auto` picks here (fp32 on an AVX2-only CPU)
+    assert report["machine"]["precision"] == resolve_precision("auto", "cpu").precision
+    cpu = torch.device("cpu")
+    assert bench_precision("32", cpu).precision == "32-true"
+    assert bench_precision("bf16", cpu).precision == "bf16-mixed"
+    with pytest.raises(
+        ValueError, match=r"bench precision must be one of \['32', 'auto', 'bf16'\], got 'fp16'"
+    ):
+        bench_precision("fp16", cpu)
