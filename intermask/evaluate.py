@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterator
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -114,8 +114,8 @@ def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Mo
 
 
 def _arflow_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[MotionSource]:
-    """ARFlow at ``arflow.steps`` with guidance (and without, for comparison), then the guided
-    sampling-step ablation rows."""
+    """ARFlow at ``arflow.steps`` with guidance (and without, and with each mode of
+    ``arflow.compare_guidance``, for comparison), then the guided sampling-step ablation rows."""
     from intermask.reaction.guidance import Guidance
     from intermask.reaction.load import load_arflow
     from intermask.utils.files import resolve_checkpoint
@@ -128,6 +128,9 @@ def _arflow_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Motio
     plans = [(settings.steps, guided)]
     if settings.compare_unguided and guided.mode != "none":
         plans.insert(0, (settings.steps, Guidance.off(beta=guided.beta)))
+    for mode in dict.fromkeys(settings.compare_guidance):  # ordered, unique
+        if mode != guided.mode:
+            plans.append((settings.steps, replace(guided, mode=mode, beta=0.0)))
     ablation = dict.fromkeys(int(steps) for steps in settings.step_ablation)  # ordered, unique
     plans += [(steps, guided) for steps in ablation if steps != settings.steps]
     return [

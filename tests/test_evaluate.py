@@ -113,9 +113,19 @@ def test_reaction_table_compares_intermask_and_arflow(synthetic_interhuman_root,
         "InterMask (reaction)",
         "ARFlow (2 steps)",
         "ARFlow + guidance (2 steps)",
+        "ARFlow + vanilla guidance (Alg. 1) (2 steps)",
+        "ARFlow + clean-gradient guidance (2 steps)",
         "ARFlow + guidance (1 step)",
         "ARFlow + guidance (3 steps)",
     ]
+    # Algorithm 1 differentiates the network, the clean-gradient variant does not: two readings
+    # of one update, two different results
+    assert (
+        rows["ARFlow + vanilla guidance (Alg. 1) (2 steps)"]["iv_cm3"]
+        != rows["ARFlow + clean-gradient guidance (2 steps)"]["iv_cm3"]
+        or rows["ARFlow + vanilla guidance (Alg. 1) (2 steps)"]["fid"]
+        != rows["ARFlow + clean-gradient guidance (2 steps)"]["fid"]
+    )
     for name, row in rows.items():
         assert row["iv_cm3"]["mean"] >= 0 and 0 <= row["if"]["mean"] <= 1
         assert ("latency_ms" in row) == (name != "Ground Truth")

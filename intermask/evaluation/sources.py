@@ -19,7 +19,7 @@ from intermask.metrics.penetration import IntersectionFrequency, IntersectionVol
 from intermask.motion import interx as ix
 from intermask.motion.masks import length_mask
 from intermask.physics.volume import DEFAULT_PITCH, DEFAULT_TOLERANCE, intersection_volume
-from intermask.reaction.guidance import Guidance
+from intermask.reaction.guidance import GUIDANCE_LABELS, Guidance
 from intermask.reaction.roles import actor_index
 from intermask.reaction.sampler import sample_reactions
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
@@ -170,7 +170,8 @@ class ARFlowReaction(MotionSource):
         self.generates = guidance.beta > 0
         guided = guidance.mode != "none" and guidance.lambda_pene > 0
         plural = "" if steps == 1 else "s"
-        self.name = name or f"ARFlow{' + guidance' if guided else ''} ({steps} step{plural})"
+        label = f" + {GUIDANCE_LABELS[guidance.mode]}" if guided else ""
+        self.name = name or f"ARFlow{label} ({steps} step{plural})"
 
     def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         inputs = batch if self.use_text else {k: v for k, v in batch.items() if k != "caption"}

@@ -1,11 +1,16 @@
 """Physical guidance of ARFlow's sampling (section 3.2, Algorithms 1-2, eqs. 10-17).
 
-The penetration gradient is taken at the clean prediction x1_hat (eq. 11), never through the
-network: x1_hat is detached, decoded to the reactor's joints and scored against the actor's
-capsule body (``intermask.physics.penetration_loss``, eq. 10; see :func:`penetration_gradient`
-for its scale).
+The penetration loss (eq. 10) scores the reactor decoded from the clean prediction x1_hat
+against the actor's capsule body (``intermask.physics.penetration_loss``). Where its gradient is
+taken is what separates the modes:
 
-* vanilla (Algorithm 1): an Euler step with x1_hat, then x_{n+1} -= lambda_pene grad.
+* vanilla (Algorithm 1, the paper's baseline): with respect to the current state x_t, through
+  the network (x1_hat = f(x_t)); an Euler step with x1_hat, then x_{n+1} -= lambda_pene grad.
+  The paper's point is that this gradient is inaccurate (the network's Jacobian distorts it)
+  and costs a backward pass per step (:func:`network_penetration_gradient`).
+* clean_gradient: the same update with the gradient taken at x1_hat itself, without the network
+  (:func:`penetration_gradient`); this project's earlier reading of Algorithm 1, kept as a named
+  variant (docs/fidelity.md).
 * improved (Algorithm 2): x1' = x1_hat - lambda_pene grad; x0_hat from (x_n, x1_hat) (eq. 12)
   is pulled towards the true action, x0* = w x0_hat + (1 - w) x0 (eq. 14), and the state is
   re-interpolated, x_{n+1} = t_{n+1} x1' + c(t_{n+1}) x0* (eq. 13).
@@ -17,6 +22,7 @@ All tensors are (B, T, D) in the flow's (normalized) space.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -26,7 +32,14 @@ from intermask.physics import DEFAULT_ZETA, BodyProxy, bone_point_weights, penet
 from intermask.reaction.flow import SIGMA_MIN, _times, euler_step, recover_x0
 from intermask.reaction.representation import FeatureSpace
 
-GuidanceMode = Literal["none", "vanilla", "improved"]
+GuidanceMode = Literal["none", "vanilla", "clean_gradient", "improved"]
+GUIDANCE_MODES = ("none", "vanilla", "clean_gradient", "improved")
+# the reaction table's row names of the guided modes (docs/fidelity.md)
+GUIDANCE_LABELS = {
+    "vanilla": "vanilla guidance (Alg. 1)",
+    "clean_gradient": "clean-gradient guidance",
+    "improved": "guidance",
+}
 # Appendix F: safe distance zeta = 0.5, lambda_pene = 2, w = 0.7.
 LAMBDA_PENE = 2.0
 WEIGHT_W = 0.7
@@ -36,7 +49,8 @@ WEIGHT_W = 0.7
 class Guidance:
     """Sampling-time guidance settings (defaults: the paper's, appendix F).
 
-    mode: "none", "vanilla" (Algorithm 1) or "improved" (Algorithm 2).
+    mode: "none", "vanilla" (Algorithm 1: gradient through the network), "clean_gradient"
+        (Algorithm 1's update, gradient at x1_hat) or "improved" (Algorithm 2).
     lambda_pene: guidance strength; zeta: safe distance in metres (eq. 10).
     w: weight of the predicted x0_hat against the true action (eq. 14, improved only).
     beta: stochastic sampling strength (eq. 16); 0 = deterministic. Appendix C tries 0.01-0.05.
@@ -51,9 +65,10 @@ class Guidance:
     points_per_bone: int = 2
 
     def __post_init__(self) -> None:
-        if self.mode not in ("none", "vanilla", "improved"):
+        if self.mode not in GUIDANCE_MODES:
             raise ValueError(
-                f"guidance mode must be 'none', 'vanilla' or 'improved', got {self.mode!r}"
+                f"guidance mode must be one of {', '.join(map(repr, GUIDANCE_MODES))}, "
+                f"got {self.mode!r}"
             )
         if self.lambda_pene < 0 or self.zeta < 0:
             raise ValueError(
@@ -61,11 +76,21 @@ class Guidance:
             )
         if not 0.0 <= self.w <= 1.0 or not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"w and beta must lie in [0, 1], got {self.w} and {self.beta}")
-        if self.mode == "vanilla" and self.beta > 0:
+        if self.mode in ("vanilla", "clean_gradient") and self.beta > 0:
             raise ValueError(
                 "stochastic sampling (beta > 0) lives in the reprojection form: use mode "
-                "'improved' or 'none', not 'vanilla'"
+                f"'improved' or 'none', not {self.mode!r}"
             )
+
+    @property
+    def through_network(self) -> bool:
+        """True when the gradient is taken with respect to x_t through the network (vanilla)."""
+        return self.mode == "vanilla"
+
+    @property
+    def euler_then_gradient(self) -> bool:
+        """True for Algorithm 1's update: an Euler step, then minus lambda_pene times the gradient."""
+        return self.mode in ("vanilla", "clean_gradient")
 
     @classmethod
     def off(cls, *, beta: float = 0.0) -> Guidance:
@@ -112,6 +137,45 @@ def penetration_gradient(
     return space.flatten(gradient / space.std).to(x1_hat.dtype)
 
 
+def network_penetration_gradient(
+    predict: Callable[[torch.Tensor], torch.Tensor],
+    x_t: torch.Tensor,
+    actor_joints: torch.Tensor,
+    space: FeatureSpace,
+    *,
+    frame_mask: torch.Tensor,
+    zeta: float = DEFAULT_ZETA,
+    proxy: BodyProxy | None = None,
+    points_per_bone: int = 2,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Algorithm 1's gradient: (x1_hat, direction), both (B, T, D) in the flow's space.
+
+    ``predict`` maps the state x_t to the clean prediction (the network, with its condition and
+    guidance scale). The loss is :func:`penetration_gradient`'s (the same sum over frames of the
+    mean over sample points), differentiated with respect to x_t through ``predict``. Like
+    :func:`penetration_gradient`, the step is a plain gradient step in dataset units, here of
+    the state: d L / d x_t divided by std squared (x_t = (f_t - mean) / std). With an identity
+    ``predict`` the two directions are equal. Only x_t is a leaf: the network's parameters get
+    no ``.grad``.
+    """
+    points = len(bone_point_weights(points_per_bone))
+    with torch.inference_mode(False), torch.enable_grad():
+        state = x_t.detach().clone().requires_grad_(True)
+        x1_hat = predict(state)
+        loss = penetration_loss(
+            space.feature_joints(space.denormalize(x1_hat.float())),
+            actor_joints.detach().clone().float(),
+            zeta=zeta,
+            proxy=proxy,
+            points_per_bone=points_per_bone,
+            frame_mask=frame_mask.clone(),
+            reduction="sum",
+        )
+        (gradient,) = torch.autograd.grad(loss / points, state)
+    direction = space.flatten(space.unflatten(gradient) / space.std**2)
+    return x1_hat.detach(), direction.to(x_t.dtype)
+
+
 def random_direction(direction: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
     """Gaussian ``noise`` rescaled to the norm of ``direction`` (B, T, D) frame by frame. The
     paper does not state the scale of d_random; matching the norm keeps beta a pure mixing
@@ -130,7 +194,7 @@ def vanilla_step(
     lambda_pene: float,
     sigma_min: float = SIGMA_MIN,
 ) -> torch.Tensor:
-    """Algorithm 1: Euler step (eq. 9), then x_{n+1} -= lambda_pene * grad at x1_hat."""
+    """Algorithm 1's update: Euler step (eq. 9), then x_{n+1} -= lambda_pene * gradient."""
     return euler_step(x_t, x1_hat, t, t_next, sigma_min=sigma_min) - lambda_pene * gradient
 
 

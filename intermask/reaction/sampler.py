@@ -18,6 +18,7 @@ from intermask.motion.masks import length_mask
 from intermask.reaction.flow import STEPS, check_sigma_min, euler_step, time_grid
 from intermask.reaction.guidance import (
     Guidance,
+    network_penetration_gradient,
     penetration_gradient,
     reprojection_step,
     vanilla_step,
@@ -85,7 +86,8 @@ def generate_reaction(
 
     text: (B, text_dim) pooled features or None (null condition). ``cfg_scale`` != 1 mixes the
     conditional and the null prediction (classifier-free guidance) in one batched call.
-    The network runs exactly ``steps`` times; guidance differentiates only the decoded joints.
+    The network runs exactly ``steps`` times. Guidance differentiates the decoded joints, and
+    in ``vanilla`` mode (Algorithm 1) the network too, with respect to the state only.
     """
     net, space, sigma_min = parts.net, parts.space, parts.sigma_min
     check_sigma_min(sigma_min)
@@ -98,9 +100,22 @@ def generate_reaction(
     times = time_grid(steps, device=actor.device)
     x = actor.clone()
     for n in range(steps):
-        x1_hat = _predict(net, x, times[n], actor, frame_mask, text, cfg_scale)
         gradient = None
-        if guided:
+        if guided and guidance.through_network:  # Algorithm 1: d loss(f(x_t)) / d x_t
+            x1_hat, gradient = network_penetration_gradient(
+                lambda state, t=times[n]: _predict(
+                    net, state, t, actor, frame_mask, text, cfg_scale
+                ),
+                x,
+                actor_joints,
+                space,
+                frame_mask=frame_mask,
+                zeta=guidance.zeta,
+                points_per_bone=guidance.points_per_bone,
+            )
+        else:
+            x1_hat = _predict(net, x, times[n], actor, frame_mask, text, cfg_scale)
+        if guided and not guidance.through_network:
             gradient = penetration_gradient(
                 x1_hat,
                 actor_joints,
@@ -117,9 +132,9 @@ def generate_reaction(
 
 
 def _advance(x, x1_hat, actor, t, t_next, gradient, noise, guidance, sigma_min) -> torch.Tensor:
-    """One sampling step: vanilla (Algorithm 1), reprojection (Algorithm 2 and / or eqs.
-    16-17), or the plain Euler step (eq. 9)."""
-    if guidance.mode == "vanilla" and gradient is not None:
+    """One sampling step: Algorithm 1's update (vanilla, clean_gradient), reprojection
+    (Algorithm 2 and / or eqs. 16-17), or the plain Euler step (eq. 9)."""
+    if guidance.euler_then_gradient and gradient is not None:
         return vanilla_step(
             x, x1_hat, gradient, t, t_next, lambda_pene=guidance.lambda_pene, sigma_min=sigma_min
         )
