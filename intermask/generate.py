@@ -23,7 +23,14 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from intermask.config_files import config_dir
-from intermask.interm.decoding import CFG_SCALE, ITERATIONS, TEMPERATURE, TOP_K_RATIO, Edit
+from intermask.interm.decoding import (
+    CFG_SCALE,
+    ITERATIONS,
+    SCHEDULE,
+    TEMPERATURE,
+    TOP_K_RATIO,
+    Edit,
+)
 from intermask.interm.load import LoadedGenerator, load_generator
 from intermask.interm.sampler import InteractionSampler
 from intermask.utils.files import file_hash
@@ -40,6 +47,7 @@ class Settings:
     cfg_scale: float = CFG_SCALE
     top_k_ratio: float = TOP_K_RATIO
     temperature: float = TEMPERATURE
+    schedule: str = SCHEDULE
     batch_size: int = 32
     fps: float = 30.0
 
@@ -183,6 +191,7 @@ def generate_samples(
         cfg_scale=settings.cfg_scale,
         top_k_ratio=settings.top_k_ratio,
         temperature=settings.temperature,
+        schedule=settings.schedule,
     )
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
@@ -385,6 +394,7 @@ def run(request: Request) -> list[Path]:
         cfg_scale=sampler["cfg_scale"] if request.cfg_scale is None else request.cfg_scale,
         top_k_ratio=request.top_k or sampler["top_k_ratio"],
         temperature=sampler["temperature"] if request.temperature is None else request.temperature,
+        schedule=sampler["schedule"],
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

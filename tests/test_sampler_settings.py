@@ -6,7 +6,13 @@ from __future__ import annotations
 from hydra import compose, initialize_config_dir
 
 from intermask import generate
-from intermask.interm.decoding import CFG_SCALE, ITERATIONS, TEMPERATURE, TOP_K_RATIO
+from intermask.interm.decoding import (
+    CFG_SCALE,
+    ITERATIONS,
+    SCHEDULE,
+    TEMPERATURE,
+    TOP_K_RATIO,
+)
 from intermask.train import CONFIG_DIR
 
 LIBRARY = {
@@ -14,6 +20,7 @@ LIBRARY = {
     "cfg_scale": CFG_SCALE,
     "top_k_ratio": TOP_K_RATIO,
     "temperature": TEMPERATURE,
+    "schedule": SCHEDULE,
 }
 
 

@@ -41,11 +41,11 @@ Batch = dict[str, Any]
 
 @dataclass(frozen=True)
 class ProtocolConstants:
-    """Defaults: InterHuman (eval-protocol.md, "Constants")."""
+    """Defaults: InterHuman (docs/evaluation.md, "Constants")."""
 
     eval_batch_size: int = 96  # R-precision / MM Dist grouping (Inter-X: 32)
     replications: int = 20
-    mm_replications: int = 20  # the InterMask paper uses 5 for InterHuman's MultiModality
+    mm_replications: int = 20  # the InterMask paper uses 5 on both datasets (configs/protocol)
     emb_scale: float = 6.0  # FID and Diversity embeddings x emb_scale (Inter-X: 1)
     divide_by: float = 2.0  # Diversity / divide_by (Inter-X: 1)
     mm_scale: float = 3.0  # InterMask's 6 / 2 on InterHuman; InterGen and Inter-X: 1

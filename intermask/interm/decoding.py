@@ -8,6 +8,10 @@ guidance), samples every still-masked position, and re-masks the
 sample). A token that survives a re-masking is never masked again; after the last iteration
 ``gamma(1) = 0`` and nothing is masked.
 
+``schedule="reference"`` is the reference code's (MoMask's) reading instead: before iteration
+``k`` it masks ``max(1, round(gamma(k / (I - 1)) * n))`` tokens, so the last iteration re-predicts
+the single least confident token (docs/fidelity.md).
+
 Interaction generation generates everything; reaction generation fixes person A's tokens
 (appendix G, "the reference tokens remain unmasked throughout"); inpainting (MoMask) fixes every
 token outside a region.
@@ -36,6 +40,8 @@ ITERATIONS = 20  # I, interaction generation (section 3.3); reaction: 12 (paper)
 CFG_SCALE = 2.0  # s, classifier-free guidance scale (appendix C.1)
 TOP_K_RATIO = 0.1  # keep the ceil(0.1 * K) largest logits (reference topk_filter_thres=0.9)
 TEMPERATURE = 1.0  # sampling temperature of the kept logits
+SCHEDULE = "paper"  # re-masking counts: "paper" (eq. 3, ceil) or "reference" (MoMask's code)
+SCHEDULES = ("paper", "reference")
 
 
 class Edit(NamedTuple):
@@ -207,6 +213,7 @@ class _Settings(NamedTuple):
     top_k_ratio: float
     temperature: float
     generators: list[torch.Generator]
+    schedule: str = SCHEDULE
 
 
 def _sample(
@@ -223,11 +230,24 @@ def _sample(
 
 
 def _remask(
-    confidence: torch.Tensor, undecided: torch.Tensor, n_generated: torch.Tensor, progress: float
+    confidence: torch.Tensor,
+    undecided: torch.Tensor,
+    n_generated: torch.Tensor,
+    iteration: int,
+    iterations: int,
+    schedule: str,
 ) -> torch.Tensor:
-    """The ``ceil(gamma(progress) * n)`` least confident of the ``undecided`` (B, ...) positions
-    just sampled stay undecided; a kept token never returns."""
-    count = scheduled_count(cosine_schedule(progress), n_generated)
+    """After iteration ``iteration`` (0-based) of ``iterations``: the least confident of the
+    ``undecided`` (B, ...) positions just sampled stay undecided, ``ceil(gamma((i + 1) / I) n)``
+    of them (paper) or ``max(1, round(gamma((i + 1) / (I - 1)) n))`` (reference; none after the
+    last iteration). A kept token never returns."""
+    if schedule == "reference":
+        if iteration == iterations - 1:
+            return torch.zeros_like(undecided)
+        ratio = cosine_schedule((iteration + 1) / (iterations - 1))
+        count = torch.round(ratio * n_generated.double()).clamp(min=1)
+    else:
+        count = scheduled_count(cosine_schedule((iteration + 1) / iterations), n_generated)
     scores = confidence.masked_fill(~undecided, math.inf)
     return lowest_ranks(scores, count) & undecided
 
@@ -252,7 +272,7 @@ def _decode_collaborative(
         )
         sampled, confidence = _sample(logits, settings)
         tokens = torch.where(undecided, sampled, tokens)
-        undecided = _remask(confidence, undecided, n_generated, (i + 1) / iterations)
+        undecided = _remask(confidence, undecided, n_generated, i, iterations, settings.schedule)
         tokens = tokens.masked_fill(undecided, model.vocabulary.mask_id)
     return tokens
 
@@ -287,7 +307,7 @@ def _decode_alternative(
             sampled, confidence = _sample(logits, settings, active=todo.flatten(1).any(1))
             own = torch.where(todo, sampled, persons[person])
             pending[person] = _remask(
-                confidence, todo, n_generated[:, person], (i + 1) / iterations
+                confidence, todo, n_generated[:, person], i, iterations, settings.schedule
             )
             persons[person] = own.masked_fill(pending[person], model.vocabulary.mask_id)
     return torch.stack(persons, dim=1)
@@ -307,6 +327,7 @@ def generate(
     seeds: torch.Tensor | Sequence[int] | None = None,
     reference_tokens: torch.Tensor | None = None,
     edit: Edit | None = None,
+    schedule: str = SCHEDULE,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -326,6 +347,8 @@ def generate(
         reference_tokens: (B, rows, T') person A's codes for reaction generation; A stays
             fixed and only person B is generated (alternative modeling: B's passes only).
         edit: :class:`Edit` for inpainting: only ``edit.region`` changes.
+        schedule: how many tokens each iteration re-masks: "paper" (the module docstring) or
+            "reference" (the reference code's counts).
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
@@ -334,6 +357,8 @@ def generate(
         raise ValueError(f"iterations must be at least 1, got {iterations}")
     if temperature < 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
+    if schedule not in SCHEDULES:
+        raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
     for given in (reference_tokens, None if edit is None else edit.tokens):
         if given is not None and steps is None:
             steps = given.shape[-1]
@@ -350,7 +375,14 @@ def generate(
         condition = None if text is None else model.encode_condition(text)
         null = null_condition(model, batch, device)
         settings = _Settings(
-            condition, null, lengths_in_steps, cfg_scale, top_k_ratio, temperature, generators
+            condition,
+            null,
+            lengths_in_steps,
+            cfg_scale,
+            top_k_ratio,
+            temperature,
+            generators,
+            schedule,
         )
         if model.modeling == "alternative":
             tokens = _decode_alternative(model, tokens, undecided, iterations, settings)

@@ -87,6 +87,8 @@ class InterMTransformer(nn.Module):
             ablations.
         double_residual_quirk, cross_context_quirk: reproduce reference-code behaviour, see
             :class:`~intermask.interm.blocks.InterMBlock`.
+        text_attends_padding: the text layers attend to all L CLIP positions, the padding after
+            end-of-text included, as the reference does (default: padding is masked out).
         modeling: ``"collaborative"`` (section 3.2) or ``"alternative"`` (appendix E, Table 3).
             Alternative modeling builds the same layers (same parameter count) but updates only
             the predicted person's embeddings in the blocks; the other person's input
@@ -115,6 +117,7 @@ class InterMTransformer(nn.Module):
         use_cross_attention: bool = True,
         double_residual_quirk: bool = False,
         cross_context_quirk: bool = False,
+        text_attends_padding: bool = False,
         modeling: str = "collaborative",
     ) -> None:
         super().__init__()
@@ -136,7 +139,7 @@ class InterMTransformer(nn.Module):
             )
         self.vocabulary = Vocabulary(codebook_size)
         self.codebook_size, self.rows, self.text_dim = codebook_size, rows, text_dim
-        self.modeling = modeling
+        self.modeling, self.text_attends_padding = modeling, text_attends_padding
 
         self.token_embedding = nn.Embedding(self.vocabulary.size, token_embed_dim)
         self.token_projection = nn.Linear(token_embed_dim, width)
@@ -193,7 +196,9 @@ class InterMTransformer(nn.Module):
         batch = features.shape[0]
         if eot_index.shape != (batch,):
             raise ValueError(f"eot_index must be ({batch},), got {tuple(eot_index.shape)}")
-        hidden = self.text_norm(self.text_encoder(features, src_key_padding_mask=text.padding_mask))
+        # the reference's text layers attend to all L positions, the padding after [EOT] too
+        padding = None if self.text_attends_padding else text.padding_mask
+        hidden = self.text_norm(self.text_encoder(features, src_key_padding_mask=padding))
         eot = hidden[torch.arange(batch, device=hidden.device), eot_index]  # (B, text_dim)
         if drop_condition is not None:
             if drop_condition.shape != (batch,):

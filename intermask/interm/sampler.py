@@ -15,6 +15,7 @@ from einops import rearrange
 from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
+    SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
     Edit,
@@ -57,8 +58,8 @@ def joints_from_features(vq: MotionVQVAE, features: torch.Tensor) -> torch.Tenso
 class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
-    ``iterations``, ``cfg_scale``, ``top_k_ratio`` and ``temperature`` default to the paper's
-    inference settings (section 3.3, appendix C.1).
+    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature`` and ``schedule`` default to
+    the paper's inference settings (section 3.3, appendix C.1).
     """
 
     def __init__(
@@ -71,10 +72,11 @@ class InteractionSampler:
         cfg_scale: float = CFG_SCALE,
         top_k_ratio: float = TOP_K_RATIO,
         temperature: float = TEMPERATURE,
+        schedule: str = SCHEDULE,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
         self.iterations, self.cfg_scale = iterations, cfg_scale
-        self.top_k_ratio, self.temperature = top_k_ratio, temperature
+        self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
 
     @property
     def device(self) -> torch.device:
@@ -125,6 +127,7 @@ class InteractionSampler:
             cfg_scale=self.cfg_scale,
             top_k_ratio=self.top_k_ratio,
             temperature=self.temperature,
+            schedule=self.schedule,
             seeds=seeds,
             reference_tokens=reference_tokens,
             edit=edit,

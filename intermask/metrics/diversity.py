@@ -18,7 +18,8 @@ class Diversity(Metric):
     """Mean distance between ``num_pairs`` random pairs of samples, x ``emb_scale`` / ``divide_by``.
 
     ``update(embeddings (B, D), sample_ids (B,) int64 | None)``; ``compute() -> ()`` float64.
-    Paper values (eval-protocol.md): 300 pairs; InterHuman emb_scale 6, divide_by 2; Inter-X 1, 1.
+    Paper values (docs/evaluation.md): 300 pairs; InterHuman emb_scale 6, divide_by 2;
+    Inter-X 1, 1.
     The pairs come from ``functional.draw_pair_indices(N, num_pairs, seed=seed)`` over the
     samples in ascending sample-id order (update order without ids), so ``compute`` is
     deterministic; a protocol replication passes its own ``seed``.

@@ -1,4 +1,4 @@
-"""Frechet distance between two sets of evaluator embeddings (eval-protocol.md, FID)."""
+"""Frechet distance between two sets of evaluator embeddings (docs/evaluation.md, "FID")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Plain metric math (eval-protocol.md, "Metrics"): the functions the torchmetrics classes wrap.
+"""Plain metric math (docs/evaluation.md, "Metrics"): the functions the torchmetrics classes wrap.
 
 Shapes: ``N`` samples, ``B`` eval batch, ``G`` generations per text, ``D`` embedding width.
 Everything that tests compare against numpy is computed in float64.
@@ -12,7 +12,7 @@ import numpy as np
 import scipy.linalg
 import torch
 
-# eval-protocol.md, FID: offset added to both covariances when sqrtm(S1 S2) is not finite, and
+# docs/evaluation.md, "FID": offset added to both covariances when sqrtm(S1 S2) is not finite, and
 # the largest imaginary part of its diagonal that counts as round-off.
 FID_COVARIANCE_EPS = 1e-6
 FID_IMAGINARY_ATOL = 1e-3

@@ -1,7 +1,7 @@
 """A capsule body proxy of the 22-joint skeleton and its signed distance.
 
 The papers measure penetration on SMPL-X meshes, which are licence-gated; this proxy sweeps a
-sphere along segments placed on the joints instead (design/reaction-and-penetration.md), so its
+sphere along segments placed on the joints instead (docs/penetration.md), so its
 numbers compare only with each other. K = 28 capsules: the 21 bones, spans across the hips and
 shoulders, the two flanks (hip to shoulder), the hands (an extension of each forearm past the
 wrist) and a head sphere (a capsule of zero length).

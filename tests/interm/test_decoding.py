@@ -139,3 +139,40 @@ def test_errors_are_reported(tiny):
         _run(model, text, seeds=[1])
     with pytest.raises(ValueError, match="iterations must be"):
         _run(model, text, iterations=0)
+
+
+@pytest.mark.parametrize("schedule", ["paper", "reference"])
+def test_each_iteration_masks_the_count_of_its_schedule(tiny, monkeypatch, schedule):
+    """paper: ceil(gamma(i / I) n) masked before iteration i > 0; reference (MoMask's code):
+    max(1, round(gamma(k / (I - 1)) n)), so its last pass re-predicts one token."""
+    import math
+
+    from intermask.interm import decoding
+
+    model, text = tiny
+    seen = []
+    original = decoding.guided_logits
+
+    def recording(model, tokens, *args, **kwargs):
+        seen.append((tokens == model.vocabulary.mask_id).flatten(1).sum(1).tolist())
+        return original(model, tokens, *args, **kwargs)
+
+    monkeypatch.setattr(decoding, "guided_logits", recording)
+    _run(model, text, iterations=ITERATIONS, schedule=schedule)
+    n = [2 * ROWS * int(length) for length in LENGTHS]  # both persons' tokens
+    gamma = [math.cos(math.pi / 2 * tau) for tau in (0.0, 1 / 3, 2 / 3, 1.0, 0.25, 0.5, 0.75)]
+    if schedule == "paper":  # iteration i sees ceil(gamma(i / 4) n)
+        expected = [[math.ceil(g * m - 1e-9) for m in n] for g in [1.0, *gamma[4:]]]
+    else:  # iteration k sees max(1, round(gamma(k / 3) n))
+        expected = [[max(1, round(g * m)) for m in n] for g in gamma[:4]]
+    assert seen == expected
+    assert schedule == "paper" or seen[-1] == [1, 1, 1]
+
+
+def test_the_reference_schedule_changes_the_result_and_is_checked(tiny):
+    model, text = tiny
+    assert not torch.equal(_run(model, text), _run(model, text, schedule="reference"))
+    with pytest.raises(
+        ValueError, match=r"schedule must be one of \('paper', 'reference'\), got 'x'"
+    ):
+        _run(model, text, schedule="x")

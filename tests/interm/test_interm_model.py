@@ -170,3 +170,21 @@ def test_invalid_inputs_raise_with_evidence(build):
         model(a, b, text, torch.tensor([7, 1, 1]))
     with pytest.raises(ValueError, match="divisible by 4"):
         InterMTransformer(**{**build.config, "width": 30, "heads": 3})
+
+
+def test_text_attends_padding_is_the_references_switch(build):
+    """Default (paper reading): the positions after end-of-text are masked in the text layers,
+    so changing them changes nothing; with the reference's switch they change the condition."""
+    from intermask.text.clip_encoder import padding_mask_from_eot
+
+    base = build.text(2)
+    padding = padding_mask_from_eot(base.eot_index, base.features.shape[1])
+    text = TextFeatures(base.features, base.eot_index, padding)
+    changed = base.features.clone()
+    changed[padding] += 1.0  # only what lies after [EOT]
+    other = TextFeatures(changed, base.eot_index, padding)
+    paper = build.model()
+    reference = build.model(text_attends_padding=True)
+    assert not paper.text_attends_padding and reference.text_attends_padding
+    torch.testing.assert_close(paper.encode_condition(text), paper.encode_condition(other))
+    assert not torch.allclose(reference.encode_condition(text), reference.encode_condition(other))

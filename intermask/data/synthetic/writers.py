@@ -1,4 +1,4 @@
-"""Write synthetic clips in the two official layouts (see design/data-formats.md).
+"""Write synthetic clips in the two official layouts (see docs/data-formats.md).
 
 InterHuman: ``annots/<id>.txt``, ``motions_processed/person{1,2}/<id>.npy`` (T, 492) float32 Z-up,
 ``split/{train,val,test}.txt``, ``ignore_list.txt``.
