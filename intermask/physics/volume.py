@@ -27,8 +27,8 @@ from intermask.physics.capsules import (
     segment_distances,
 )
 
-DEFAULT_PITCH = 0.01  # metres; design page: 1-2 cm (ARFlow voxelizes meshes, pitch unstated)
-DEFAULT_TOLERANCE = 0.0  # cm^3; design page: a frame penetrates when any voxel is shared
+DEFAULT_PITCH = 0.01  # metres; docs/penetration.md: 1-2 cm (ARFlow voxelizes meshes, pitch unstated)
+DEFAULT_TOLERANCE = 0.0  # cm^3; docs/penetration.md: a frame penetrates when any voxel is shared
 DEFAULT_CHUNK_VOXELS = 1 << 20  # box voxels per chunk: ~0.1 GB of temporaries
 _PAIR_FRAMES = 512  # frames per chunk of the (F, K, K) pair test
 _BOX_SLACK = 1e-6  # metres: keeps voxels on a box face in despite rounding (never double-counts)

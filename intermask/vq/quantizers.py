@@ -40,6 +40,9 @@ def _perplexity(indices: torch.Tensor, codebook_size: int) -> torch.Tensor:
     return torch.exp(-(probabilities * torch.log(probabilities.clamp_min(1e-10))).sum())
 
 
+RESETS = ("restart", "reference")  # dead-code rules of EMAQuantizer
+
+
 class EMAQuantizer(nn.Module):
     """Nearest-code quantizer with an EMA-updated codebook.
 
@@ -53,6 +56,11 @@ class EMAQuantizer(nn.Module):
             -distance / temperature (the reference's choice, 0.5) instead of the nearest code;
             evaluation always uses the nearest code.
         eps: Laplace smoothing of the counts.
+        reset: ``"restart"`` (default): a dead code restarts from a random encoder output with
+            count 1, and codes are EMA sums over Laplace-smoothed counts. ``"reference"``: the
+            reference code's rule: codes are EMA sums over raw counts, and a code whose count
+            is below ``reset_threshold`` is overwritten by a random encoder output at every
+            step while its EMA statistics are left to recover (docs/fidelity.md).
     """
 
     def __init__(
@@ -64,10 +72,14 @@ class EMAQuantizer(nn.Module):
         reset_threshold: float = 1.0,
         stochastic_temperature: float | None = None,
         eps: float = 1e-5,
+        reset: str = "restart",
     ) -> None:
         super().__init__()
         if not 0.0 < decay < 1.0:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
+        if reset not in RESETS:
+            raise ValueError(f"reset must be one of {RESETS}, got {reset!r}")
+        self.reset = reset
         if stochastic_temperature is not None and stochastic_temperature <= 0:
             raise ValueError(
                 f"stochastic_temperature must be positive or None, got {stochastic_temperature}"
@@ -193,6 +205,8 @@ class EMAQuantizer(nn.Module):
         sums = all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
         self.ema_count.mul_(self.decay).add_(counts, alpha=1 - self.decay)
         self.ema_sum.mul_(self.decay).add_(sums, alpha=1 - self.decay)
+        if self.reset == "reference":
+            return self._reference_update(flat, generator)
         total = self.ema_count.sum()
         smoothed = (self.ema_count + self.eps) / (total + self.codebook_size * self.eps) * total
         self.codebook.copy_(self.ema_sum / smoothed[:, None])
@@ -205,6 +219,18 @@ class EMAQuantizer(nn.Module):
             self.ema_sum[dead] = replacement[dead]
             self.ema_count[dead] = 1.0
         return dead.sum()
+
+    @torch.no_grad()
+    def _reference_update(self, flat: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
+        """The reference's codebook after the EMA step: sum / count where the count reaches the
+        threshold, a fresh random encoder output elsewhere (statistics untouched)."""
+        used = self.ema_count >= self.reset_threshold
+        replacement = self._random_rows(flat, self.codebook_size, generator)
+        if process_group()[1] > 1:
+            dist.broadcast(replacement, src=0)
+        means = self.ema_sum / self.ema_count.clamp_min(torch.finfo(flat.dtype).tiny)[:, None]
+        self.codebook.copy_(torch.where(used[:, None], means, replacement))
+        return (~used).sum()
 
 
 class ResidualQuantizer(nn.Module):
@@ -224,6 +250,7 @@ class ResidualQuantizer(nn.Module):
         decay: float = 0.99,
         reset_threshold: float = 1.0,
         stochastic_temperature: float | None = None,
+        reset: str = "restart",
     ) -> None:
         super().__init__()
         if num_quantizers < 1:
@@ -238,6 +265,7 @@ class ResidualQuantizer(nn.Module):
                 decay=decay,
                 reset_threshold=reset_threshold,
                 stochastic_temperature=stochastic_temperature,
+                reset=reset,
             )
             for _ in range(num_quantizers)
         )

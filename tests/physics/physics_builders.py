@@ -66,7 +66,7 @@ def dense_shared_voxels(
 
 
 def lens_volume(r1: float, r2: float, d: float) -> float:
-    """Closed-form volume of the intersection of two balls (design page), metres^3."""
+    """Closed-form volume of the intersection of two balls (docs/penetration.md), metres^3."""
     return (
         math.pi * (r1 + r2 - d) ** 2 * (d * d + 2 * d * (r1 + r2) - 3 * (r1 - r2) ** 2) / (12 * d)
     )

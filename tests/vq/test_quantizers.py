@@ -51,6 +51,39 @@ def test_dead_codes_are_reset_to_current_encoder_outputs():
     torch.testing.assert_close(quantizer.ema_count[1:], torch.ones(2))
 
 
+def test_the_reference_reset_keeps_raw_statistics_and_overwrites_unused_codes():
+    """reset="reference": codes are raw EMA means (no smoothing); an unused code is replaced by
+    a batch vector while its count stays below the threshold and its sum is kept."""
+    quantizer = EMAQuantizer(codebook_size=3, dim=2, decay=0.9, reset="reference").train()
+    quantizer.codebook.copy_(torch.tensor([[0.0, 0.0], [100.0, 100.0], [-100.0, 100.0]]))
+    quantizer.ema_sum.copy_(quantizer.codebook)
+    quantizer.ema_count.fill_(1.0)
+    quantizer.initialized.fill_(True)
+    x = torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1]]).T.reshape(1, 2, 1, 4)
+    out = quantizer(x)
+    assert out.dead_codes == 2
+    # code 0: count 0.9 + 0.1 * 4 = 1.3, sum 0.9 * 0 + 0.1 * 0 = 0 -> mean exactly 0
+    torch.testing.assert_close(quantizer.ema_count, torch.tensor([1.3, 0.9, 0.9]))
+    assert torch.equal(quantizer.codebook[0], torch.zeros(2))
+    torch.testing.assert_close(
+        quantizer.ema_sum[1:], 0.9 * torch.tensor([[100.0, 100.0], [-100.0, 100.0]])
+    )
+    vectors = x.permute(0, 2, 3, 1).reshape(-1, 2)
+    for code in (1, 2):
+        assert (torch.cdist(quantizer.codebook[code : code + 1], vectors) == 0).any()
+    # the default restart rule on the same step: counts back to 1, sums reset
+    restart = EMAQuantizer(codebook_size=3, dim=2, decay=0.9).train()
+    restart.load_state_dict(
+        {
+            **quantizer.state_dict(),
+            "ema_count": torch.ones(3),
+            "ema_sum": torch.tensor([[0.0, 0.0], [100.0, 100.0], [-100.0, 100.0]]),
+        }
+    )
+    restart(x)
+    torch.testing.assert_close(restart.ema_count[1:], torch.ones(2))
+
+
 def test_eval_mode_picks_the_nearest_code_and_leaves_the_codebook_alone():
     quantizer = EMAQuantizer(codebook_size=2, dim=1, stochastic_temperature=0.5).eval()
     quantizer.codebook.copy_(torch.tensor([[0.0], [1.0]]))
@@ -105,6 +138,7 @@ def test_quantization_dropout_keeps_a_prefix_of_layers():
             dict(stochastic_temperature=0.0),
             "stochastic_temperature must be positive or None, got 0.0",
         ),
+        (dict(reset="x"), r"reset must be one of \('restart', 'reference'\), got 'x'"),
     ],
 )
 def test_invalid_options_are_rejected(kwargs, message):
