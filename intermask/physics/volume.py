@@ -27,7 +27,8 @@ from intermask.physics.capsules import (
     segment_distances,
 )
 
-DEFAULT_PITCH = 0.01  # metres; docs/penetration.md: 1-2 cm (ARFlow voxelizes meshes, pitch unstated)
+# docs/penetration.md: 1-2 cm (ARFlow voxelizes meshes, pitch unstated)
+DEFAULT_PITCH = 0.01  # metres
 DEFAULT_TOLERANCE = 0.0  # cm^3; docs/penetration.md: a frame penetrates when any voxel is shared
 DEFAULT_CHUNK_VOXELS = 1 << 20  # box voxels per chunk: ~0.1 GB of temporaries
 _PAIR_FRAMES = 512  # frames per chunk of the (F, K, K) pair test

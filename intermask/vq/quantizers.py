@@ -221,7 +221,9 @@ class EMAQuantizer(nn.Module):
         return dead.sum()
 
     @torch.no_grad()
-    def _reference_update(self, flat: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
+    def _reference_update(
+        self, flat: torch.Tensor, generator: torch.Generator | None
+    ) -> torch.Tensor:
         """The reference's codebook after the EMA step: sum / count where the count reaches the
         threshold, a fresh random encoder output elsewhere (statistics untouched)."""
         used = self.ema_count >= self.reset_threshold
