@@ -180,7 +180,12 @@ def _add_generate_parser(commands) -> None:
         "--cfg-scale", type=_non_negative_float, help="classifier-free guidance scale (2)"
     )
     parser.add_argument(
-        "--iterations", type=_positive_int, help="decoding iterations (20; reaction 10)"
+        "--iterations", type=_positive_int, help="decoding iterations (20; reaction 12)"
+    )
+    parser.add_argument(
+        "--schedule",
+        choices=("paper", "reference"),
+        help="re-masking counts: the paper's (default) or the reference code's (docs/fidelity.md)",
     )
     parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
     parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")

@@ -350,6 +350,7 @@ class Request:
     iterations: int | None = None
     top_k: float | None = None
     temperature: float | None = None
+    schedule: str | None = None
     batch_size: int | None = None
     fps: float | None = None
     reaction: str | None = None
@@ -394,7 +395,7 @@ def run(request: Request) -> list[Path]:
         cfg_scale=sampler["cfg_scale"] if request.cfg_scale is None else request.cfg_scale,
         top_k_ratio=request.top_k or sampler["top_k_ratio"],
         temperature=sampler["temperature"] if request.temperature is None else request.temperature,
-        schedule=sampler["schedule"],
+        schedule=request.schedule or sampler["schedule"],
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

@@ -98,6 +98,11 @@ def test_cli_reports_an_unknown_checkpoint(tmp_path, capsys):
         ("--cfg-scale", "-1", "expected a finite number >= 0, got -1"),
         ("--top-k", "5", r"expected a ratio in \(0, 1\], got 5"),
         ("--top-k", "nan", r"expected a ratio in \(0, 1\], got nan"),
+        (
+            "--schedule",
+            "momask",
+            r"invalid choice: 'momask' \(choose from '?paper'?, '?reference'?\)",
+        ),
     ],
 )
 def test_cli_numbers_are_checked_before_any_work(tmp_path, capsys, option, value, message):

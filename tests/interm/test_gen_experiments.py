@@ -33,6 +33,9 @@ EXPERIMENTS = {
 }
 CPU_SETTINGS = {"gen_demo"}  # CPU-sized: paper switches, not paper sizes (tested below)
 SYNTHETIC_SETTINGS = {"gen_synthetic_long", "gen_synthetic_long_cpu"}  # long runs (tested below)
+REFERENCE_SETTINGS = {
+    "gen_interhuman_reference"
+}  # the reference code's switches (test_fidelity.py)
 TINY_NET = {
     "width": 32,
     "heads": 2,
@@ -61,7 +64,7 @@ def _compose(experiment: str, *extra: str):
 
 def test_every_gen_experiment_file_is_covered():
     files = {path.stem for path in Path(CONFIG_DIR, "experiment").glob("gen_*.yaml")}
-    assert files == set(EXPERIMENTS) | CPU_SETTINGS | SYNTHETIC_SETTINGS
+    assert files == set(EXPERIMENTS) | CPU_SETTINGS | SYNTHETIC_SETTINGS | REFERENCE_SETTINGS
 
 
 def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
