@@ -11,7 +11,9 @@ with three differences of packing:
 * AdaLN: each reference block regresses the joint stage's 6 vectors and the person stage's 14 in
   two linears; ours gives every sub-layer its own (3 + 3, then 6 + 5 + 3), in the same order;
 * the frozen CLIP text tower lives inside the reference model; here its per-token features come
-  from the text cache, so those keys are dropped (and reported).
+  from the text cache, so those keys are dropped (and reported);
+* the reference stores its 2D position encoding's frequencies as a buffer; ours computes them
+  (``interm/position.py``), so the buffer is checked against ours and not copied.
 
 :func:`convert_reference_generator` returns the state dict and a report naming every key it
 dropped, every reference key it could not place and every key of ours left without a value.
@@ -56,6 +58,7 @@ _MODULATION = {
     "adaLN_mod_split": (("spatio_temporal", 6), ("cross_attention", 5), ("person_ffn", 3)),
 }
 _FFN_LINEARS = {"model.0.": "net.0.", "model.3.": "net.3."}
+_FREQUENCIES = "position_enc.positional_encoding.inv_freq"
 
 
 class Conversion(NamedTuple):
@@ -63,6 +66,7 @@ class Conversion(NamedTuple):
 
     state: dict[str, torch.Tensor]
     dropped: list[str]  # reference keys left out on purpose (the frozen CLIP tower)
+    computed: list[str]  # reference buffers this model computes itself, checked equal
     unmapped: list[str]  # reference keys with no place here
     missing: list[str]  # keys of ``target`` that got no value (empty when target is None)
     mismatched: list[str]  # "key: ours (shape) vs converted (shape)"
@@ -130,10 +134,15 @@ def convert_reference_generator(
     reported, and its keys without a converted value too.
     """
     out: dict[str, torch.Tensor] = {}
-    dropped, unmapped = [], []
+    dropped, unmapped, computed, mismatched = [], [], [], []
     for key, value in reference.items():
         if key.startswith(_CLIP_PREFIXES):
             dropped.append(key)
+            continue
+        if key == _FREQUENCIES:
+            computed.append(key)
+            if not _same_frequencies(value):
+                mismatched.append(f"{key}: not the 2D encoding's frequencies for this width")
             continue
         renamed = next((p for p in _RENAMED if key.startswith(p)), None)
         if renamed is not None:
@@ -144,14 +153,24 @@ def convert_reference_generator(
             if _block_key(rest, f"blocks.{index}", value, out):
                 continue
         unmapped.append(key)
-    missing, mismatched = [], []
+    missing = []
     if target is not None:
         missing = sorted(set(target) - set(out))
         for key in sorted(set(out) - set(target)):
             unmapped.append(f"{key} (converted)")
-        mismatched = [
+        mismatched += [
             f"{key}: ours {tuple(target[key].shape)} vs converted {tuple(out[key].shape)}"
             for key in sorted(set(out) & set(target))
             if target[key].shape != out[key].shape
         ]
-    return Conversion(out, dropped, unmapped, missing, mismatched)
+    return Conversion(out, dropped, computed, unmapped, missing, mismatched)
+
+
+def _same_frequencies(value: torch.Tensor) -> bool:
+    """The reference's (C/2,) inverse frequencies against ours for a width D = 2C (C = D/2
+    channels per axis, interleaved sin/cos: 10000^(-2i / C))."""
+    if value.is_meta or value.ndim != 1:
+        return value.ndim == 1
+    channels = 2 * value.shape[0]
+    ours = 10000.0 ** (-torch.arange(0, channels, 2, dtype=torch.float64) / channels)
+    return torch.allclose(value.double(), ours, rtol=1e-6, atol=0.0)

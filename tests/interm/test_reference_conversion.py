@@ -44,6 +44,7 @@ def reference_layout() -> dict[str, tuple[int, ...]]:
         "output_process.adaLN_mod.model.1.bias": (2 * D,),
         "output_process.poseFinal.weight": (K, D),
         "output_process.poseFinal.bias": (K,),
+        "position_enc.positional_encoding.inv_freq": (D // 4,),
         "clipln.weight": (TEXT,),
         "clipln.bias": (TEXT,),
         # the frozen CLIP tower (dropped: its features come from the text cache)
@@ -97,6 +98,16 @@ def test_every_reference_key_lands_on_the_paper_model():
     assert sorted(conversion.dropped) == sorted(k for k in layout if k.startswith("clip_"))
     assert set(conversion.state) == set(ours)
     assert "dropped 5 frozen CLIP key(s)" in conversion.report()
+    assert conversion.computed == ["position_enc.positional_encoding.inv_freq"]
+
+
+def test_the_reference_position_frequencies_are_checked_against_ours():
+    channels = D // 2  # per axis
+    frequencies = 1.0 / (10000 ** (torch.arange(0, channels, 2).float() / channels))
+    key = "position_enc.positional_encoding.inv_freq"
+    assert convert_reference_generator({key: frequencies}).mismatched == []
+    wrong = convert_reference_generator({key: frequencies * 2}).mismatched
+    assert wrong == [f"{key}: not the 2D encoding's frequencies for this width"]
 
 
 def test_packed_weights_are_split_in_order():
