@@ -22,9 +22,10 @@ dropped, every reference key it could not place and every key of ours left witho
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import NamedTuple
 
 import torch
+
+from intermask.utils.state_conversion import Conversion
 
 # reference prefix -> ours, for modules whose parameters keep their names
 _RENAMED = {
@@ -59,34 +60,6 @@ _MODULATION = {
 }
 _FFN_LINEARS = {"model.0.": "net.0.", "model.3.": "net.3."}
 _FREQUENCIES = "position_enc.positional_encoding.inv_freq"
-
-
-class Conversion(NamedTuple):
-    """A converted state dict and what did not map."""
-
-    state: dict[str, torch.Tensor]
-    dropped: list[str]  # reference keys left out on purpose (the frozen CLIP tower)
-    computed: list[str]  # reference buffers this model computes itself, checked equal
-    unmapped: list[str]  # reference keys with no place here
-    missing: list[str]  # keys of ``target`` that got no value (empty when target is None)
-    mismatched: list[str]  # "key: ours (shape) vs converted (shape)"
-
-    @property
-    def complete(self) -> bool:
-        return not (self.unmapped or self.missing or self.mismatched)
-
-    def report(self) -> str:
-        lines = [
-            f"dropped {len(self.dropped)} frozen CLIP key(s) (features come from the text cache)"
-        ]
-        for title, keys in (
-            ("reference keys with no place", self.unmapped),
-            ("keys without a value", self.missing),
-            ("shape mismatches", self.mismatched),
-        ):
-            if keys:
-                lines.append(f"{title} ({len(keys)}): " + ", ".join(keys))
-        return "\n".join(lines)
 
 
 def _block_key(rest: str, block: str, value: torch.Tensor, out: dict[str, torch.Tensor]) -> bool:

@@ -124,6 +124,10 @@ class MotionDecoder(nn.Module):
     Each stage upsamples by nearest neighbour with (joint_scale[i], 2) and convolves; the joint
     scales (InterHuman 2.2, 2 -> 5, 11, 22; Inter-X 3.5, 3.3 -> 5, 17, 56) come from the
     reference implementation and are checked against ``num_joints`` at construction.
+    ``reverse_dilations`` runs each residual stack's dilations in the reverse of the encoder's
+    order (this framework's first reading, kept as the default of the class so that runs saved
+    before the switch decode as they trained); the configs set False: the reference decoder
+    uses the encoder's order, (3, 1), and the paper is silent (docs/fidelity.md).
     """
 
     def __init__(
@@ -135,6 +139,7 @@ class MotionDecoder(nn.Module):
         joint_scales: tuple[float, float] = (2.2, 2.0),
         latent_rows: int = 5,
         dilations: tuple[int, ...] = (3, 1),
+        reverse_dilations: bool = True,
         dropout: float = 0.2,
         layout: TokenLayout = "2d",
     ) -> None:
@@ -156,7 +161,7 @@ class MotionDecoder(nn.Module):
             stages += [
                 residual_stack(
                     width=width,
-                    dilations=tuple(reversed(dilations)),
+                    dilations=tuple(reversed(dilations)) if reverse_dilations else tuple(dilations),
                     dropout=dropout,
                     layout=layout,
                 ),

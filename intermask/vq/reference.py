@@ -1,0 +1,91 @@
+"""The reference implementation's VQ-VAE weights in this framework's layout.
+
+The authors' release stores the tokenizer as an ``RVQVAE`` state dict (``vq_model`` or ``net``
+in its checkpoint). Its encoder and decoder are nested ``Sequential``s (a strided convolution and
+a ``Resnet`` of ``ResConvBlock``s per stage; a ``Resnet``, an upsampling and a convolution per
+decoder stage); ours are flat ``Sequential``s of the same layers in the same order, so the
+conversion renames indices. The reference quantizer keeps only its codebook; the EMA statistics
+this framework also stores are derived from it (sums = codes, counts = 1), so a converted
+tokenizer can be fine-tuned.
+
+The newest InterHuman release replaces the first and last convolutions with two graph layers
+(``gcn_layer*``), which this framework does not build (docs/fidelity.md): those keys are
+reported as unmapped, by name.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping
+
+import torch
+
+from intermask.utils.state_conversion import Conversion
+
+_Rule = tuple[re.Pattern[str], Callable[[re.Match[str]], str]]
+
+
+def _block(prefix: str, stack: int) -> Callable[[re.Match[str]], str]:
+    layer = {"conv1": 1, "conv2": 3}  # ReLU, conv1, ReLU, conv2 in our residual block's body
+    return lambda m: f"{prefix}.net.{stack}.{m['block']}.body.{layer[m['conv']]}.{m['kind']}"
+
+
+_RES = r"model\.(?P<block>\d+)\.(?P<conv>conv[12])\.(?P<kind>weight|bias)"
+_KIND = r"(?P<kind>weight|bias)"
+_RULES: list[_Rule] = [
+    (re.compile(pattern), target)
+    for pattern, target in (
+        # encoder: in conv, ReLU, [strided conv, Resnet] x 2, out conv
+        (rf"encoder\.model\.0\.{_KIND}", lambda m: f"encoder.net.0.{m['kind']}"),
+        (rf"encoder\.model\.2\.0\.{_KIND}", lambda m: f"encoder.net.2.{m['kind']}"),
+        (rf"encoder\.model\.2\.1\.{_RES}", _block("encoder", 3)),
+        (rf"encoder\.model\.3\.0\.{_KIND}", lambda m: f"encoder.net.4.{m['kind']}"),
+        (rf"encoder\.model\.3\.1\.{_RES}", _block("encoder", 5)),
+        (rf"encoder\.model\.4\.{_KIND}", lambda m: f"encoder.net.6.{m['kind']}"),
+        # decoder: in conv, ReLU, [Resnet, upsample, conv] x 2, conv, ReLU, out conv
+        (rf"decoder\.model\.0\.{_KIND}", lambda m: f"decoder.net.0.{m['kind']}"),
+        (rf"decoder\.model\.2\.0\.{_RES}", _block("decoder", 2)),
+        (rf"decoder\.model\.2\.2\.{_KIND}", lambda m: f"decoder.net.4.{m['kind']}"),
+        (rf"decoder\.model\.3\.0\.{_RES}", _block("decoder", 5)),
+        (rf"decoder\.model\.3\.2\.{_KIND}", lambda m: f"decoder.net.7.{m['kind']}"),
+        (rf"decoder\.model\.4\.{_KIND}", lambda m: f"decoder.net.8.{m['kind']}"),
+        (rf"decoder\.model\.6\.{_KIND}", lambda m: f"decoder.net.10.{m['kind']}"),
+    )
+]
+_CODEBOOK = re.compile(r"quantizer\.layers\.(?P<layer>\d+)\.codebook")
+
+
+def convert_reference_vq(
+    reference: Mapping[str, torch.Tensor], target: Mapping[str, torch.Tensor] | None = None
+) -> Conversion:
+    """The reference ``RVQVAE`` state dict -> ours (see the module docstring); ``target`` (our
+    model's state dict) adds the missing and mis-shaped keys to the report."""
+    out: dict[str, torch.Tensor] = {}
+    unmapped, computed = [], []
+    for key, value in reference.items():
+        codebook = _CODEBOOK.fullmatch(key)
+        if codebook is not None:
+            layer = f"quantizer.layers.{codebook['layer']}"
+            out[f"{layer}.codebook"] = value
+            out[f"{layer}.ema_sum"] = value.clone()
+            out[f"{layer}.ema_count"] = torch.ones(value.shape[0], dtype=value.dtype)
+            out[f"{layer}.initialized"] = torch.tensor(True)
+            computed += [f"{layer}.ema_sum", f"{layer}.ema_count", f"{layer}.initialized"]
+            continue
+        for pattern, target_key in _RULES:
+            match = pattern.fullmatch(key)
+            if match is not None:
+                out[target_key(match)] = value
+                break
+        else:
+            unmapped.append(key)
+    missing, mismatched = [], []
+    if target is not None:
+        missing = sorted(set(target) - set(out))
+        unmapped += [f"{key} (converted)" for key in sorted(set(out) - set(target))]
+        mismatched = [
+            f"{key}: ours {tuple(target[key].shape)} vs converted {tuple(out[key].shape)}"
+            for key in sorted(set(out) & set(target))
+            if target[key].shape != out[key].shape
+        ]
+    return Conversion(out, [], computed, unmapped, missing, mismatched)
