@@ -161,6 +161,23 @@ def _generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _convert_reference(args: argparse.Namespace) -> int:
+    from intermask.convert import convert_reference
+
+    done = convert_reference(
+        vq=Path(args.vq),
+        generator=None if args.generator is None else Path(args.generator),
+        out=args.out,
+        dataset=args.dataset,
+    )
+    for name, report in done.reports.items():
+        print(f"{name}: {report}")
+    print(f"tokenizer run: {done.vq_run}")
+    if done.gen_run is not None:
+        print(f"generator run: {done.gen_run} (intermask generate --checkpoint {done.gen_run})")
+    return 0
+
+
 def _add_generate_parser(commands) -> None:
     parser = commands.add_parser(
         "generate",
@@ -273,6 +290,17 @@ def build_parser() -> argparse.ArgumentParser:
     success.set_defaults(run=_data_success_stats)
 
     _add_generate_parser(commands)
+    convert = commands.add_parser(
+        "convert-reference",
+        help="the authors' released checkpoints -> run folders of this framework",
+        description="Reads <name>/model/<which>.tar beside <name>/opt.txt (weights only) and writes "
+        "OUT/vq and OUT/gen run folders with the reference behaviours on (docs/fidelity.md).",
+    )
+    convert.add_argument("--vq", required=True, help="the release's VQ-VAE checkpoint (.tar)")
+    convert.add_argument("--generator", help="the release's transformer checkpoint (.tar)")
+    convert.add_argument("--out", required=True, type=_output_folder, help="output folder")
+    convert.add_argument("--dataset", choices=("interhuman", "interx"), help="default: opt.txt's")
+    convert.set_defaults(run=_convert_reference)
     return parser
 
 

@@ -1,0 +1,173 @@
+"""``intermask convert-reference``: the authors' released checkpoints as run folders of this
+framework, with the reference behaviours switched on (docs/fidelity.md).
+
+The release lays out each model as ``<name>/model/<which>.tar`` beside ``<name>/opt.txt``: the
+tokenizer's checkpoint holds ``vq_model`` (or ``net``), the generator's ``t2m_transformer``.
+Both are read with ``weights_only=True``. The output is two run folders that ``load_vq``,
+``load_generator``, ``intermask generate`` and ``make eval`` accept::
+
+    <out>/vq/config.yaml, <out>/vq/checkpoints/last.ckpt     (experiment=vq_<dataset>_reference)
+    <out>/gen/config.yaml, <out>/gen/checkpoints/last.ckpt   (experiment=gen_<dataset> with the
+                                                             reference switches of rows 1-3)
+
+Every key that is dropped, derived, cannot be placed or has another shape is reported by name;
+a conversion that leaves any of our weights without a value is refused.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from omegaconf import OmegaConf, open_dict
+
+from intermask.config_files import config_dir
+from intermask.interm.reference import convert_reference_generator
+from intermask.utils.checkpoint_files import atomic_torch_save, read_checkpoint_file
+from intermask.utils.fingerprint import weights_digest
+from intermask.utils.state_conversion import Conversion
+from intermask.vq.reference import convert_reference_vq
+
+DATASETS = ("interhuman", "interx")
+VQ_KEYS = ("vq_model", "net")
+GENERATOR_KEYS = ("t2m_transformer", "trans")
+# reference switches of the generator (docs/fidelity.md rows 1-3)
+REFERENCE_GENERATOR = {
+    "text_attends_padding": True,
+    "double_residual_quirk": True,
+    "cross_context_quirk": True,
+}
+
+
+@dataclass(frozen=True)
+class Converted:
+    vq_run: Path
+    gen_run: Path | None
+    reports: dict[str, str]
+
+
+def read_options(checkpoint: Path) -> dict[str, str]:
+    """The ``key: value`` lines of the ``opt.txt`` beside a release checkpoint (in its folder or
+    the folder above ``model/``)."""
+    for folder in (checkpoint.parent, checkpoint.parent.parent):
+        path = folder / "opt.txt"
+        if path.is_file():
+            options = {}
+            for line in path.read_text().splitlines():
+                key, sep, value = line.partition(": ")
+                if sep and not line.startswith("-"):
+                    options[key.strip()] = value.strip()
+            return options
+    raise FileNotFoundError(
+        f"{checkpoint}: no opt.txt beside it or in {checkpoint.parent.parent} (the release keeps "
+        "<name>/opt.txt beside <name>/model/)"
+    )
+
+
+def _state(checkpoint: Path, keys: tuple[str, ...], kind: str) -> dict[str, torch.Tensor]:
+    stored = read_checkpoint_file(checkpoint)
+    for key in keys:
+        if isinstance(stored, dict) and key in stored:
+            return stored[key]
+    found = sorted(stored) if isinstance(stored, dict) else type(stored).__name__
+    raise ValueError(
+        f"{checkpoint}: not a reference {kind} checkpoint (no {' or '.join(keys)}; found {found})"
+    )
+
+
+def _compose(job: str, overrides: list[str]):
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(job, overrides=overrides)
+
+
+def _checked(conversion: Conversion, checkpoint: Path, kind: str) -> Conversion:
+    if not conversion.complete:
+        raise ValueError(
+            f"{checkpoint}: the reference {kind} does not map onto this framework's:\n"
+            + conversion.report()
+        )
+    return conversion
+
+
+def _write_run(folder: Path, config: Any, payload: dict[str, Any]) -> Path:
+    if folder.exists():
+        raise FileExistsError(f"{folder} exists: choose another --out (nothing was overwritten)")
+    with open_dict(config):
+        config.paths.output_dir = str(folder)  # what a training run records as its folder
+    (folder / "checkpoints").mkdir(parents=True)
+    OmegaConf.save(config, folder / "config.yaml", resolve=True)
+    atomic_torch_save(payload, folder / "checkpoints" / "last.ckpt")
+    return folder
+
+
+def convert_reference(
+    *, vq: Path, generator: Path | None, out: Path, dataset: str | None = None
+) -> Converted:
+    """Convert the release's tokenizer (and generator) into run folders under ``out``."""
+    vq, out = Path(vq), Path(out)
+    vq_options = read_options(vq)
+    dataset = dataset or vq_options.get("dataset_name")
+    if dataset not in DATASETS:
+        raise ValueError(
+            f"{vq}: dataset {dataset!r} (opt.txt dataset_name or --dataset) is not one of {DATASETS}"
+        )
+    reports = {}
+    vq_config = _compose("train_vq", [f"data={dataset}", f"experiment=vq_{dataset}"])
+    with open_dict(vq_config):
+        vq_config.model.net.quantizer.stochastic_temperature = 0.5  # fidelity rows 6-7
+        vq_config.model.net.quantizer.reset = "reference"
+    vq_net = instantiate(vq_config.model.net)
+    conversion = _checked(
+        convert_reference_vq(_state(vq, VQ_KEYS, "VQ-VAE"), vq_net.state_dict()), vq, "VQ-VAE"
+    )
+    reports["vq"] = conversion.report()
+    vq_net.load_state_dict(conversion.state)
+    vq_payload = {
+        "state_dict": {f"net.{k}": v for k, v in vq_net.state_dict().items()},
+        "hyper_parameters": {"converted_from": str(vq), "reference_options": vq_options},
+    }
+    gen = None
+    if generator is not None:  # converted in full before anything is written
+        generator = Path(generator)
+        vq_checkpoint = out / "vq" / "checkpoints" / "last.ckpt"
+        gen_config = _compose(
+            "train_gen",
+            [f"data={dataset}", f"experiment=gen_{dataset}", f"vq_ckpt={vq_checkpoint}"],
+        )
+        with open_dict(gen_config):
+            gen_config.model.net.update(REFERENCE_GENERATOR)
+        codebook = vq_net.quantizer.codebook_size
+        net = instantiate(gen_config.model.net)(codebook_size=codebook)
+        conversion = _checked(
+            convert_reference_generator(
+                _state(generator, GENERATOR_KEYS, "generator"), net.state_dict()
+            ),
+            generator,
+            "generator",
+        )
+        reports["generator"] = conversion.report()
+        net.load_state_dict(conversion.state)
+        gen = (
+            gen_config,
+            {
+                "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()},
+                "hyper_parameters": {
+                    "codebook_size": codebook,
+                    "vq_digest": weights_digest(vq_net.eval()),
+                    "converted_from": str(generator),
+                    "reference_options": read_options(generator),
+                },
+            },
+        )
+    for folder in (out / "vq", out / "gen"):
+        if folder.exists():
+            raise FileExistsError(
+                f"{folder} exists: choose another --out (nothing was overwritten)"
+            )
+    vq_run = _write_run(out / "vq", vq_config, vq_payload)
+    gen_run = None if gen is None else _write_run(out / "gen", *gen)
+    return Converted(vq_run, gen_run, reports)
