@@ -26,6 +26,7 @@ from intermask.config_files import config_dir
 from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
+    NOISE,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -48,6 +49,7 @@ class Settings:
     top_k_ratio: float = TOP_K_RATIO
     temperature: float = TEMPERATURE
     schedule: str = SCHEDULE
+    noise: str = NOISE
     batch_size: int = 32
     fps: float = 30.0
 
@@ -192,6 +194,7 @@ def generate_samples(
         top_k_ratio=settings.top_k_ratio,
         temperature=settings.temperature,
         schedule=settings.schedule,
+        noise=settings.noise,
     )
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
@@ -396,6 +399,7 @@ def run(request: Request) -> list[Path]:
         top_k_ratio=request.top_k or sampler["top_k_ratio"],
         temperature=sampler["temperature"] if request.temperature is None else request.temperature,
         schedule=request.schedule or sampler["schedule"],
+        noise=sampler["noise"],
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

@@ -25,6 +25,7 @@ def test_the_defaults_are_the_papers_reading():
     assert _compose("train_vq", "experiment=vq_interhuman").data.batch_size == 512
     evaluation = _compose("eval", "eval_ckpt=x.ckpt")
     assert evaluation.sampler.schedule == "paper" and evaluation.reaction.iterations == 12
+    assert evaluation.sampler.noise == "per_sample"
     assert evaluation.arflow.guidance.mode == "improved"
     assert list(evaluation.arflow.compare_guidance) == ["vanilla", "clean_gradient"]
     assert _compose("generate").reaction_iterations == 12
@@ -55,6 +56,7 @@ def test_every_switch_of_the_table_is_named_in_it():
     for switch in (
         *(f"model.net.{row}" for row in sorted(GEN_ROWS)),
         "sampler.schedule",
+        "sampler.noise",
         "reaction.iterations=10",
         "model.net.quantizer.stochastic_temperature",
         "model.net.quantizer.reset",

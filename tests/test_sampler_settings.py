@@ -9,6 +9,7 @@ from intermask import generate
 from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
+    NOISE,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -21,6 +22,7 @@ LIBRARY = {
     "top_k_ratio": TOP_K_RATIO,
     "temperature": TEMPERATURE,
     "schedule": SCHEDULE,
+    "noise": NOISE,
 }
 
 

@@ -42,6 +42,8 @@ TOP_K_RATIO = 0.1  # keep the ceil(0.1 * K) largest logits (reference topk_filte
 TEMPERATURE = 1.0  # sampling temperature of the kept logits
 SCHEDULE = "paper"  # re-masking counts: "paper" (eq. 3, ceil) or "reference" (MoMask's code)
 SCHEDULES = ("paper", "reference")
+NOISE = "per_sample"  # "per_sample" (each sample its own generator) or "reference" (see generate)
+NOISES = ("per_sample", "reference")
 
 
 class Edit(NamedTuple):
@@ -214,6 +216,7 @@ class _Settings(NamedTuple):
     temperature: float
     generators: list[torch.Generator]
     schedule: str = SCHEDULE
+    noise: str = NOISE
 
 
 def _sample(
@@ -222,11 +225,26 @@ def _sample(
     """(B, ..., T', K) guided logits -> sampled codes and the probability of each under the
     guided logits before top-k and temperature (as in the reference), both (B, ..., T')."""
     filtered = top_k_filter(logits, settings.top_k_ratio)
+    if settings.noise == "reference" and settings.temperature > 0:
+        sampled = _reference_draw(filtered, settings.generators[0], settings.temperature)
+        confidence = logits.float().softmax(-1).gather(-1, sampled[..., None])[..., 0]
+        return sampled, confidence
     sampled = sample_codes(
         filtered, settings.lengths_in_steps, settings.generators, settings.temperature, active
     )
     confidence = logits.float().log_softmax(-1).gather(-1, sampled[..., None])[..., 0].exp()
     return sampled, confidence
+
+
+def _reference_draw(
+    filtered: torch.Tensor, generator: torch.Generator, temperature: float
+) -> torch.Tensor:
+    """The reference's draw: ``Categorical(softmax(filtered) / temperature).sample()`` over every
+    position of the batch, in order, from one generator (the temperature is normalised away)."""
+    probs = filtered.float().softmax(-1) / temperature
+    probs = probs / probs.sum(-1, keepdim=True)
+    flat = probs.reshape(-1, probs.shape[-1])
+    return torch.multinomial(flat, 1, True, generator=generator).reshape(probs.shape[:-1])
 
 
 def _remask(
@@ -328,6 +346,7 @@ def generate(
     reference_tokens: torch.Tensor | None = None,
     edit: Edit | None = None,
     schedule: str = SCHEDULE,
+    noise: str = NOISE,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -349,6 +368,11 @@ def generate(
         edit: :class:`Edit` for inpainting: only ``edit.region`` changes.
         schedule: how many tokens each iteration re-masks: "paper" (the module docstring) or
             "reference" (the reference code's counts).
+        noise: "per_sample" (each sample's draws from its own seed: results independent of the
+            batch) or "reference": one generator seeded with ``seeds[0]`` draws every position of
+            the batch in the reference's order (``torch.multinomial``), so that with the
+            reference schedule and the same seed the reference's tokens come out; a sample then
+            depends on its batch.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
@@ -359,6 +383,8 @@ def generate(
         raise ValueError(f"temperature must be >= 0, got {temperature}")
     if schedule not in SCHEDULES:
         raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
+    if noise not in NOISES:
+        raise ValueError(f"noise must be one of {NOISES}, got {noise!r}")
     for given in (reference_tokens, None if edit is None else edit.tokens):
         if given is not None and steps is None:
             steps = given.shape[-1]
@@ -383,6 +409,7 @@ def generate(
             temperature,
             generators,
             schedule,
+            noise,
         )
         if model.modeling == "alternative":
             tokens = _decode_alternative(model, tokens, undecided, iterations, settings)

@@ -15,6 +15,7 @@ from einops import rearrange
 from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
+    NOISE,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -58,7 +59,7 @@ def joints_from_features(vq: MotionVQVAE, features: torch.Tensor) -> torch.Tenso
 class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
-    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature`` and ``schedule`` default to
+    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule`` and ``noise`` default to
     the paper's inference settings (section 3.3, appendix C.1).
     """
 
@@ -73,10 +74,12 @@ class InteractionSampler:
         top_k_ratio: float = TOP_K_RATIO,
         temperature: float = TEMPERATURE,
         schedule: str = SCHEDULE,
+        noise: str = NOISE,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
         self.iterations, self.cfg_scale = iterations, cfg_scale
         self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
+        self.noise = noise
 
     @property
     def device(self) -> torch.device:
@@ -128,6 +131,7 @@ class InteractionSampler:
             top_k_ratio=self.top_k_ratio,
             temperature=self.temperature,
             schedule=self.schedule,
+            noise=self.noise,
             seeds=seeds,
             reference_tokens=reference_tokens,
             edit=edit,

@@ -1,3 +1,5 @@
+import math
+
 import pytest
 import torch
 
@@ -176,3 +178,31 @@ def test_the_reference_schedule_changes_the_result_and_is_checked(tiny):
         ValueError, match=r"schedule must be one of \('paper', 'reference'\), got 'x'"
     ):
         _run(model, text, schedule="x")
+
+
+def test_reference_noise_is_the_references_multinomial_draw_over_the_batch(tiny):
+    """noise="reference": one generator (seeds[0]) draws every position with torch.multinomial,
+    as the reference's Categorical sampling does; the codes then depend on the batch."""
+    from intermask.interm import decoding
+
+    logits = torch.randn(2, 2, ROWS, STEPS, K, generator=torch.Generator().manual_seed(4))
+    filtered = decoding.top_k_filter(logits, 0.5)
+    drawn = decoding._reference_draw(filtered, torch.Generator().manual_seed(9), 1.0)
+    probs = filtered.softmax(-1)
+    expected = torch.multinomial(
+        (probs / probs.sum(-1, keepdim=True)).reshape(-1, K), 1, True,
+        generator=torch.Generator().manual_seed(9),
+    ).reshape(drawn.shape)  # fmt: skip
+    assert torch.equal(drawn, expected)
+    assert bool((filtered.gather(-1, drawn[..., None]) > -math.inf).all())  # inside the top-k
+    model, text = tiny
+    together = _run(model, text, seeds=[5, 5, 5], schedule="reference", noise="reference")
+    again = _run(model, text, seeds=[5, 5, 5], schedule="reference", noise="reference")
+    assert torch.equal(together, again)
+    alone = _run(
+        model, _subset(text, [0]), LENGTHS[:1], steps=STEPS, seeds=[5],
+        schedule="reference", noise="reference",
+    )  # fmt: skip
+    assert not torch.equal(alone[0], together[0])  # the batch changes the draws
+    with pytest.raises(ValueError, match=r"noise must be one of \('per_sample', 'reference'\)"):
+        _run(model, text, noise="global")
