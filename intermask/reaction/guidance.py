@@ -121,20 +121,37 @@ def penetration_gradient(
     Only the features are a leaf: nothing reaches the network or the actor. Works inside
     ``torch.no_grad`` and ``torch.inference_mode`` (Lightning's validation) too.
     """
-    points = len(bone_point_weights(points_per_bone))
     with torch.inference_mode(False), torch.enable_grad():
         features = space.denormalize(x1_hat.detach().clone().float()).requires_grad_(True)
-        loss = penetration_loss(
-            space.feature_joints(features),
-            actor_joints.detach().clone().float(),
-            zeta=zeta,
-            proxy=proxy,
-            points_per_bone=points_per_bone,
-            frame_mask=frame_mask.clone(),
-            reduction="sum",
+        loss = _guidance_loss(
+            features, actor_joints, space, frame_mask, zeta, proxy, points_per_bone
         )
-        (gradient,) = torch.autograd.grad(loss / points, features)
+        (gradient,) = torch.autograd.grad(loss, features)
     return space.flatten(gradient / space.std).to(x1_hat.dtype)
+
+
+def _guidance_loss(
+    features: torch.Tensor,
+    actor_joints: torch.Tensor,
+    space: FeatureSpace,
+    frame_mask: torch.Tensor,
+    zeta: float,
+    proxy: BodyProxy | None,
+    points_per_bone: int,
+) -> torch.Tensor:
+    """The guidance loss of both modes on de-normalized reactor ``features``: the penetration
+    summed over frames, averaged over the reactor's sample points."""
+    points = len(bone_point_weights(points_per_bone))
+    loss = penetration_loss(
+        space.feature_joints(features),
+        actor_joints.detach().clone().float(),
+        zeta=zeta,
+        proxy=proxy,
+        points_per_bone=points_per_bone,
+        frame_mask=frame_mask.clone(),
+        reduction="sum",
+    )
+    return loss / points
 
 
 def network_penetration_gradient(
@@ -158,20 +175,19 @@ def network_penetration_gradient(
     ``predict`` the two directions are equal. Only x_t is a leaf: the network's parameters get
     no ``.grad``.
     """
-    points = len(bone_point_weights(points_per_bone))
     with torch.inference_mode(False), torch.enable_grad():
         state = x_t.detach().clone().requires_grad_(True)
         x1_hat = predict(state)
-        loss = penetration_loss(
-            space.feature_joints(space.denormalize(x1_hat.float())),
-            actor_joints.detach().clone().float(),
-            zeta=zeta,
-            proxy=proxy,
-            points_per_bone=points_per_bone,
-            frame_mask=frame_mask.clone(),
-            reduction="sum",
+        loss = _guidance_loss(
+            space.denormalize(x1_hat.float()),
+            actor_joints,
+            space,
+            frame_mask,
+            zeta,
+            proxy,
+            points_per_bone,
         )
-        (gradient,) = torch.autograd.grad(loss / points, state)
+        (gradient,) = torch.autograd.grad(loss, state)
     direction = space.flatten(space.unflatten(gradient) / space.std**2)
     return x1_hat.detach(), direction.to(x_t.dtype)
 

@@ -33,13 +33,18 @@ def test_ema_update_moves_codes_toward_the_mean_of_their_vectors():
     )
 
 
-def test_dead_codes_are_reset_to_current_encoder_outputs():
-    quantizer = EMAQuantizer(codebook_size=3, dim=2, decay=0.9, reset_threshold=1.0).train()
+def _one_used_code_of_three(quantizer: EMAQuantizer) -> torch.Tensor:
+    """Codes at the origin and far away, counts 1; -> a batch of 4 vectors all nearest code 0."""
     quantizer.codebook.copy_(torch.tensor([[0.0, 0.0], [100.0, 100.0], [-100.0, 100.0]]))
     quantizer.ema_sum.copy_(quantizer.codebook)
     quantizer.ema_count.fill_(1.0)
     quantizer.initialized.fill_(True)
-    x = torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1]]).T.reshape(1, 2, 1, 4)
+    return torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1]]).T.reshape(1, 2, 1, 4)
+
+
+def test_dead_codes_are_reset_to_current_encoder_outputs():
+    quantizer = EMAQuantizer(codebook_size=3, dim=2, decay=0.9, reset_threshold=1.0).train()
+    x = _one_used_code_of_three(quantizer)
     out = quantizer(x)
     # codes 1 and 2 got nothing: count 0.9 < 1 -> replaced by batch vectors, count back to 1
     assert out.dead_codes == 2
@@ -55,11 +60,7 @@ def test_the_reference_reset_keeps_raw_statistics_and_overwrites_unused_codes():
     """reset="reference": codes are raw EMA means (no smoothing); an unused code is replaced by
     a batch vector while its count stays below the threshold and its sum is kept."""
     quantizer = EMAQuantizer(codebook_size=3, dim=2, decay=0.9, reset="reference").train()
-    quantizer.codebook.copy_(torch.tensor([[0.0, 0.0], [100.0, 100.0], [-100.0, 100.0]]))
-    quantizer.ema_sum.copy_(quantizer.codebook)
-    quantizer.ema_count.fill_(1.0)
-    quantizer.initialized.fill_(True)
-    x = torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1]]).T.reshape(1, 2, 1, 4)
+    x = _one_used_code_of_three(quantizer)
     out = quantizer(x)
     assert out.dead_codes == 2
     # code 0: count 0.9 + 0.1 * 4 = 1.3, sum 0.9 * 0 + 0.1 * 0 = 0 -> mean exactly 0
