@@ -4,28 +4,31 @@ switches on; bad releases are refused by name before anything is written."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 import torch
 
-sys.path.insert(0, str(Path(__file__).parent / "interm"))
-sys.path.insert(0, str(Path(__file__).parent / "vq"))
-from test_reference_conversion import reference_interx_layout  # noqa: E402 (tests/vq)
-
-from intermask.cli import main  # noqa: E402
+from intermask.cli import main
 
 
-def _generator_layout():
+def _layouts():
+    """The reference key layouts written out in tests/interm and tests/vq (loaded by path: the
+    test folders are not packages)."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(
-        "interm_reference_keys", Path(__file__).parent / "interm" / "test_reference_conversion.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.reference_layout()
+    modules = {}
+    for name, path in (
+        ("generator", "interm/test_reference_generator.py"),
+        ("vq", "vq/test_reference_vq.py"),
+    ):
+        spec = importlib.util.spec_from_file_location(
+            f"reference_layout_{name}", Path(__file__).parent / path
+        )
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        modules[name] = module
+    return modules["generator"].reference_layout(), modules["vq"].reference_interx_layout()
 
 
 def _release(root: Path, name: str, entry: str, layout: dict, options: dict) -> Path:
@@ -50,9 +53,10 @@ def _release(root: Path, name: str, entry: str, layout: dict, options: dict) -> 
 def test_a_release_becomes_runs_that_load_with_the_reference_switches(tmp_path, capsys):
     from intermask.interm.load import load_generator
 
-    vq = _release(tmp_path, "vq_release", "vq_model", reference_interx_layout(),
+    generator_layout, vq_layout = _layouts()
+    vq = _release(tmp_path, "vq_release", "vq_model", vq_layout,
                   {"dataset_name": "interx", "nb_code": 1024})  # fmt: skip
-    layout = {k: s for k, s in _generator_layout().items() if not k.startswith("clip_")}
+    layout = {k: s for k, s in generator_layout.items() if not k.startswith("clip_")}
     generator = _release(tmp_path, "trans_release", "t2m_transformer", layout,
                          {"dataset_name": "interx", "latent_dim": 384})  # fmt: skip
     out = tmp_path / "converted"
