@@ -22,7 +22,7 @@ STAGES = [
     ["interm"],
     ["evaluator", "reaction", "render"],
     ["evaluation"],
-    ["train", "generate"],
+    ["train", "generate", "convert"],
     ["evaluate", "overfit", "bench"],
     ["cli", "<package>"],
 ]
