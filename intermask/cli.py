@@ -164,11 +164,14 @@ def _generate(args: argparse.Namespace) -> int:
 def _convert_reference(args: argparse.Namespace) -> int:
     from intermask.convert import convert_reference
 
+    if (args.mean is None) != (args.std is None):
+        raise ValueError("--mean and --std go together (the release's global_mean/std.npy)")
     done = convert_reference(
         vq=Path(args.vq),
         generator=None if args.generator is None else Path(args.generator),
         out=args.out,
         dataset=args.dataset,
+        statistics=None if args.mean is None else (Path(args.mean), Path(args.std)),
     )
     for name, report in done.reports.items():
         print(f"{name}: {report}")
@@ -300,6 +303,8 @@ def build_parser() -> argparse.ArgumentParser:
     convert.add_argument("--generator", help="the release's transformer checkpoint (.tar)")
     convert.add_argument("--out", required=True, type=_output_folder, help="output folder")
     convert.add_argument("--dataset", choices=("interhuman", "interx"), help="default: opt.txt's")
+    convert.add_argument("--mean", help="the release's global_mean.npy (InterHuman)")
+    convert.add_argument("--std", help="the release's global_std.npy (InterHuman)")
     convert.set_defaults(run=_convert_reference)
     return parser
 

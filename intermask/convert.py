@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
@@ -30,7 +31,7 @@ from intermask.interm.reference import convert_reference_generator
 from intermask.utils.checkpoint_files import atomic_torch_save, read_checkpoint_file
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.state_conversion import Conversion
-from intermask.vq.reference import convert_reference_vq
+from intermask.vq.reference import convert_reference_vq, has_graph_ends
 
 DATASETS = ("interhuman", "interx")
 VQ_KEYS = ("vq_model", "net")
@@ -104,10 +105,22 @@ def _write_run(folder: Path, config: Any, payload: dict[str, Any]) -> Path:
     return folder
 
 
+STATISTICS = ("view.mean", "view.std", "view.has_statistics")
+
+
 def convert_reference(
-    *, vq: Path, generator: Path | None, out: Path, dataset: str | None = None
+    *,
+    vq: Path,
+    generator: Path | None,
+    out: Path,
+    dataset: str | None = None,
+    statistics: tuple[Path, Path] | None = None,
 ) -> Converted:
-    """Convert the release's tokenizer (and generator) into run folders under ``out``."""
+    """Convert the release's tokenizer (and generator) into run folders under ``out``.
+
+    ``statistics``: the release's ``global_mean.npy`` and ``global_std.npy`` (InterHuman: the
+    reference normalizes the 262 features with them; Inter-X has none).
+    """
     vq, out = Path(vq), Path(out)
     vq_options = read_options(vq)
     dataset = dataset or vq_options.get("dataset_name")
@@ -117,15 +130,29 @@ def convert_reference(
         )
     reports = {}
     vq_config = _compose("train_vq", [f"data={dataset}", f"experiment=vq_{dataset}"])
+    reference_vq = _state(vq, VQ_KEYS, "VQ-VAE")
     with open_dict(vq_config):
         vq_config.model.net.quantizer.stochastic_temperature = 0.5  # fidelity rows 6-7
         vq_config.model.net.quantizer.reset = "reference"
+        if has_graph_ends(reference_vq):  # the InterHuman release (fidelity, graph ends)
+            vq_config.model.net.encoder.ends = "graph_first_frame"
     vq_net = instantiate(vq_config.model.net)
-    conversion = _checked(
-        convert_reference_vq(_state(vq, VQ_KEYS, "VQ-VAE"), vq_net.state_dict()), vq, "VQ-VAE"
-    )
+    conversion = convert_reference_vq(reference_vq, vq_net.state_dict())
+    needs_statistics = [key for key in conversion.missing if key in STATISTICS]
+    if needs_statistics:
+        if statistics is None:
+            raise ValueError(
+                f"{vq}: this tokenizer normalizes its features: pass the release's statistics "
+                "(--mean global_mean.npy --std global_std.npy)"
+            )
+        mean, std = (torch.from_numpy(np.load(path)).float() for path in statistics)
+        vq_net.view.set_statistics(mean, std)
+        conversion = conversion._replace(
+            missing=[key for key in conversion.missing if key not in STATISTICS]
+        )
+    _checked(conversion, vq, "VQ-VAE")
     reports["vq"] = conversion.report()
-    vq_net.load_state_dict(conversion.state)
+    vq_net.load_state_dict({**vq_net.state_dict(), **conversion.state})
     vq_payload = {
         "state_dict": {f"net.{k}": v for k, v in vq_net.state_dict().items()},
         "hyper_parameters": {"converted_from": str(vq), "reference_options": vq_options},

@@ -98,10 +98,11 @@ def test_bad_releases_are_refused_by_name(tmp_path, capsys):
     (tmp_path / "a" / "opt.txt").unlink()
     assert main(["convert-reference", "--vq", str(vq), "--out", str(tmp_path / "o2")]) == 2
     assert "no opt.txt beside it" in capsys.readouterr().err
-    graph = {"encoder.gcn_layer1.lin.weight": (512, 12), "quantizer.layers.0.codebook": (1024, 512)}
+    graph = {"encoder.gcn_layer1.lin.weight": (12, 12), "quantizer.layers.0.codebook": (1024, 512)}
     vq = _release(tmp_path, "b", "vq_model", graph, {"dataset_name": "interhuman"})
     assert main(["convert-reference", "--vq", str(vq), "--out", str(tmp_path / "o3")]) == 2
     err = capsys.readouterr().err
-    assert "the reference VQ-VAE does not map onto this framework's" in err
-    assert "reference keys with no place (1): encoder.gcn_layer1.lin.weight" in err
+    assert "this tokenizer normalizes its features: pass the release's statistics" in err
+    assert main(["convert-reference", "--vq", str(vq), "--mean", "m.npy", "--out", "o4"]) == 2
+    assert "--mean and --std go together" in capsys.readouterr().err
     assert not (tmp_path / "o3").exists()

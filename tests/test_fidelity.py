@@ -22,6 +22,12 @@ def test_the_defaults_are_the_papers_reading():
     assert {row: gen.model.net[row] for row in GEN_ROWS} == dict.fromkeys(GEN_ROWS, False)
     vq = _compose("train_vq", "experiment=vq_interhuman").model.net.quantizer
     assert (vq.stochastic_temperature, vq.reset) == (None, "restart")
+    net = _compose("train_vq", "experiment=vq_interhuman").model.net
+    assert (net.encoder.ends, net.decoder.ends, net.decoder.reverse_dilations) == (
+        "conv",
+        "conv",
+        False,
+    )
     assert _compose("train_vq", "experiment=vq_interhuman").data.batch_size == 512
     evaluation = _compose("eval", "eval_ckpt=x.ckpt")
     assert evaluation.sampler.schedule == "paper" and evaluation.reaction.iterations == 12
@@ -60,6 +66,7 @@ def test_every_switch_of_the_table_is_named_in_it():
         "reaction.iterations=10",
         "model.net.quantizer.stochastic_temperature",
         "model.net.quantizer.reset",
+        "model.net.encoder.ends",
         "arflow.guidance.mode",
         "clean_gradient",
         "protocol.mm_replications",

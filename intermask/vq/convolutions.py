@@ -14,6 +14,8 @@ import torch
 from einops import rearrange
 from torch import nn
 
+from intermask.motion.skeleton import KINEMATIC_CHAINS, NUM_JOINTS
+
 TokenLayout = Literal["2d", "1d"]
 
 
@@ -78,6 +80,63 @@ def _to_grid(x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
     return rearrange(x, "b t j c -> b (j c) t")
 
 
+GraphEnds = Literal["conv", "graph", "graph_first_frame"]
+
+
+class SkeletonGraphLayer(nn.Module):
+    """A GraphSAGE layer over the 22-joint skeleton, on (B, C, J, T) grids: each joint's output is
+    ``lin_l(mean over its neighbours of relu(lin(x_n))) + lin_r(x)`` (the reference's
+    ``SAGEConv(project=True)``, mean aggregation, edges both ways along the kinematic chains).
+
+    ``first_frame_only`` reproduces the reference's use: it passes one skeleton's edge index for
+    a batch flattened to B x T x J nodes, so only frame 0 of sample 0 aggregates neighbours and
+    every other node gets ``lin_l.bias + lin_r(x)`` (docs/fidelity.md).
+    """
+
+    def __init__(self, in_channels: int, out_channels: int, *, first_frame_only: bool) -> None:
+        super().__init__()
+        self.first_frame_only = first_frame_only
+        self.lin = nn.Linear(in_channels, in_channels)
+        self.lin_l = nn.Linear(in_channels, out_channels)
+        self.lin_r = nn.Linear(in_channels, out_channels, bias=False)
+        adjacency = torch.zeros(NUM_JOINTS, NUM_JOINTS)
+        for chain in KINEMATIC_CHAINS:
+            for parent, child in zip(chain, chain[1:], strict=False):
+                adjacency[parent, child] = adjacency[child, parent] = 1.0
+        self.register_buffer("mean", adjacency / adjacency.sum(1, keepdim=True), persistent=False)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        nodes = rearrange(x, "b c j t -> b t j c")
+        neighbours = torch.relu(self.lin(nodes))
+        if self.first_frame_only:
+            mean = torch.zeros_like(neighbours)
+            mean[0, 0] = self.mean @ neighbours[0, 0]
+        else:
+            mean = torch.einsum("ij,btjc->btic", self.mean, neighbours)
+        out = self.lin_l(mean) + self.lin_r(nodes)
+        return channels_last(rearrange(out, "b t j c -> b c j t"))
+
+
+def _end(
+    ends: GraphEnds, layout: TokenLayout, in_channels: int, out_channels: int, width: int
+) -> nn.Module:
+    """The encoder's first layer or the decoder's last: a 3x3 convolution (the paper) or two
+    skeleton graph layers through ``width`` channels with a ReLU between them (the reference's
+    InterHuman release, docs/fidelity.md)."""
+    if ends == "conv":
+        return _conv(layout, in_channels, out_channels, (3, 3))
+    if ends not in ("graph", "graph_first_frame"):
+        raise ValueError(f"ends must be 'conv', 'graph' or 'graph_first_frame', got {ends!r}")
+    if layout != "2d":
+        raise ValueError(f"graph ends need the 2d token layout, got {layout!r}")
+    first_frame_only = ends == "graph_first_frame"
+    return nn.Sequential(
+        SkeletonGraphLayer(in_channels, width, first_frame_only=first_frame_only),
+        nn.ReLU(),
+        SkeletonGraphLayer(width, out_channels, first_frame_only=first_frame_only),
+    )
+
+
 class MotionEncoder(nn.Module):
     """(B, T, J, C) per-joint features -> (B, D, rows, T/4) latent grid (rows = 5, or 1 for "1d")."""
 
@@ -92,6 +151,7 @@ class MotionEncoder(nn.Module):
         dilations: tuple[int, ...] = (3, 1),
         dropout: float = 0.2,
         layout: TokenLayout = "2d",
+        ends: GraphEnds = "conv",
     ) -> None:
         super().__init__()
         self.layout, self.num_joints, self.in_channels = layout, num_joints, in_channels
@@ -107,7 +167,7 @@ class MotionEncoder(nn.Module):
             )
         ]
         self.net = nn.Sequential(
-            _conv(layout, stem_in, width, (3, 3)),
+            _end(ends, layout, stem_in, width, width),
             nn.ReLU(),
             *downsample,
             _conv(layout, width, width, (3, 3)),
@@ -142,6 +202,7 @@ class MotionDecoder(nn.Module):
         reverse_dilations: bool = True,
         dropout: float = 0.2,
         layout: TokenLayout = "2d",
+        ends: GraphEnds = "conv",
     ) -> None:
         super().__init__()
         self.layout, self.num_joints, self.out_channels = layout, num_joints, out_channels
@@ -175,7 +236,7 @@ class MotionDecoder(nn.Module):
             *stages,
             _conv(layout, width, width, (3, 3)),
             nn.ReLU(),
-            _conv(layout, width, head_out, (3, 3)),
+            _end(ends, layout, width, head_out, width),
         )
 
     def forward(self, latent: torch.Tensor) -> torch.Tensor:

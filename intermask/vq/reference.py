@@ -8,9 +8,10 @@ conversion renames indices. The reference quantizer keeps only its codebook; the
 this framework also stores are derived from it (sums = codes, counts = 1), so a converted
 tokenizer can be fine-tuned.
 
-The newest InterHuman release replaces the first and last convolutions with two graph layers
-(``gcn_layer*``), which this framework does not build (docs/fidelity.md): those keys are
-reported as unmapped, by name.
+The InterHuman release replaces the encoder's first and the decoder's last convolution with two
+graph layers each (``gcn_layer*``, torch_geometric's ``SAGEConv``); they map onto
+:class:`~intermask.vq.convolutions.SkeletonGraphLayer` (``ends: graph_first_frame``), and its
+encoder's ``Sequential`` then starts one index earlier.
 """
 
 from __future__ import annotations
@@ -52,7 +53,28 @@ _RULES: list[_Rule] = [
         (rf"decoder\.model\.6\.{_KIND}", lambda m: f"decoder.net.10.{m['kind']}"),
     )
 ]
+_GRAPH = r"(?P<part>lin|lin_l|lin_r)\.(?P<kind>weight|bias)"
+# the graph variant: the encoder has no first conv and ReLU, so its stages start at index 0
+_GRAPH_RULES: list[_Rule] = [
+    (re.compile(pattern), target)
+    for pattern, target in (
+        (rf"encoder\.gcn_layer1\.{_GRAPH}", lambda m: f"encoder.net.0.0.{m['part']}.{m['kind']}"),
+        (rf"encoder\.gcn_layer2\.{_GRAPH}", lambda m: f"encoder.net.0.2.{m['part']}.{m['kind']}"),
+        (rf"encoder\.model\.0\.0\.{_KIND}", lambda m: f"encoder.net.2.{m['kind']}"),
+        (rf"encoder\.model\.0\.1\.{_RES}", _block("encoder", 3)),
+        (rf"encoder\.model\.1\.0\.{_KIND}", lambda m: f"encoder.net.4.{m['kind']}"),
+        (rf"encoder\.model\.1\.1\.{_RES}", _block("encoder", 5)),
+        (rf"encoder\.model\.2\.{_KIND}", lambda m: f"encoder.net.6.{m['kind']}"),
+        (rf"decoder\.gcn_layer1\.{_GRAPH}", lambda m: f"decoder.net.10.0.{m['part']}.{m['kind']}"),
+        (rf"decoder\.gcn_layer2\.{_GRAPH}", lambda m: f"decoder.net.10.2.{m['part']}.{m['kind']}"),
+    )
+] + [rule for rule in _RULES if rule[0].pattern.startswith("decoder")]
 _CODEBOOK = re.compile(r"quantizer\.layers\.(?P<layer>\d+)\.codebook")
+
+
+def has_graph_ends(reference: Mapping[str, torch.Tensor]) -> bool:
+    """True for the InterHuman release's layout (graph layers at both ends)."""
+    return any(".gcn_layer" in key for key in reference)
 
 
 def convert_reference_vq(
@@ -62,6 +84,7 @@ def convert_reference_vq(
     model's state dict) adds the missing and mis-shaped keys to the report."""
     out: dict[str, torch.Tensor] = {}
     unmapped, computed = [], []
+    rules = _GRAPH_RULES if has_graph_ends(reference) else _RULES
     for key, value in reference.items():
         codebook = _CODEBOOK.fullmatch(key)
         if codebook is not None:
@@ -72,7 +95,7 @@ def convert_reference_vq(
             out[f"{layer}.initialized"] = torch.tensor(True)
             computed += [f"{layer}.ema_sum", f"{layer}.ema_count", f"{layer}.initialized"]
             continue
-        for pattern, target_key in _RULES:
+        for pattern, target_key in rules:
             match = pattern.fullmatch(key)
             if match is not None:
                 out[target_key(match)] = value

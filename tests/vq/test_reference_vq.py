@@ -71,18 +71,71 @@ def test_every_reference_interx_key_lands_and_the_ema_statistics_are_derived():
     ]
 
 
-def test_the_interhuman_graph_layers_are_reported_by_name():
-    reference = {
-        "encoder.gcn_layer1.lin.weight": torch.empty(W, 12, device="meta"),
-        "decoder.gcn_layer2.lin_l.weight": torch.empty(12, W, device="meta"),
-        "decoder.model.0.weight": torch.empty(W, W, 3, 3, device="meta"),
+def reference_interhuman_layout() -> dict[str, tuple[int, ...]]:
+    """The InterHuman release: graph layers at both ends, the encoder's stages from index 0."""
+    keys = {
+        "encoder.model.2.weight": (W, W, 3, 3),
+        "encoder.model.2.bias": (W,),
+        "decoder.model.0.weight": (W, W, 3, 3),
+        "decoder.model.0.bias": (W,),
+        "decoder.model.4.weight": (W, W, 3, 3),
+        "decoder.model.4.bias": (W,),
+        "quantizer.layers.0.codebook": (1024, W),
     }
-    conversion = convert_reference_vq(reference)
-    assert conversion.unmapped == [
-        "encoder.gcn_layer1.lin.weight",
-        "decoder.gcn_layer2.lin_l.weight",
-    ]
-    assert "reference keys with no place (2)" in conversion.report()
+    for end, (first, last) in {"encoder": (12, W), "decoder": (W, 12)}.items():
+        for layer, (n_in, n_out) in {1: (first, W), 2: (W, last)}.items():
+            prefix = f"{end}.gcn_layer{layer}"
+            keys |= {
+                f"{prefix}.lin.weight": (n_in, n_in),
+                f"{prefix}.lin.bias": (n_in,),
+                f"{prefix}.lin_l.weight": (n_out, n_in),
+                f"{prefix}.lin_l.bias": (n_out,),
+                f"{prefix}.lin_r.weight": (n_out, n_in),
+            }
+    for stage in (0, 1):
+        keys[f"encoder.model.{stage}.0.weight"] = (W, W, 4, 4)
+        keys[f"encoder.model.{stage}.0.bias"] = (W,)
+        keys |= _resnet(f"encoder.model.{stage}.1")
+    for stage in (2, 3):
+        keys |= _resnet(f"decoder.model.{stage}.0")
+        keys[f"decoder.model.{stage}.2.weight"] = (W, W, 3, 3)
+        keys[f"decoder.model.{stage}.2.bias"] = (W,)
+    return keys
+
+
+def test_the_interhuman_graph_release_lands_on_graph_ends():
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(
+            "train_vq", overrides=["data=interhuman", "model.net.encoder.ends=graph_first_frame"]
+        )
+    with torch.device("meta"):
+        ours = instantiate(cfg.model.net).state_dict()
+        reference = {k: torch.empty(s) for k, s in reference_interhuman_layout().items()}
+    conversion = convert_reference_vq(reference, ours)
+    assert conversion.unmapped == [] and conversion.mismatched == []
+    # the statistics are the dataset's (the release's global_mean/std.npy), not weights
+    assert conversion.missing == ["view.has_statistics", "view.mean", "view.std"]
+
+
+def test_the_graph_layer_is_graphsage_and_the_reference_aggregates_one_frame():
+    from intermask.vq.convolutions import SkeletonGraphLayer
+
+    torch.manual_seed(0)
+    every = SkeletonGraphLayer(3, 4, first_frame_only=False)
+    first = SkeletonGraphLayer(3, 4, first_frame_only=True)
+    first.load_state_dict(every.state_dict())
+    x = torch.randn(2, 3, 22, 5)  # (B, C, J, T)
+    nodes = x.permute(0, 3, 2, 1)
+    # joint 4 (left knee) neighbours the left hip 1 and the left ankle 7
+    projected = torch.relu(every.lin(nodes))
+    mean = (projected[..., 1, :] + projected[..., 7, :]) / 2
+    expected = every.lin_l(mean) + every.lin_r(nodes[..., 4, :])  # (B, T, 4)
+    torch.testing.assert_close(every(x)[:, :, 4, :].permute(0, 2, 1), expected)
+    out = first(x).permute(0, 3, 2, 1)  # (B, T, J, 4)
+    torch.testing.assert_close(out[0, 0, 4], expected[0, 0])  # sample 0, frame 0 aggregates
+    alone = every.lin_l.bias + every.lin_r(nodes)  # every other node: no neighbours
+    torch.testing.assert_close(out[1], alone[1])
+    torch.testing.assert_close(out[0, 1:], alone[0, 1:])
 
 
 def test_the_decoder_keeps_the_encoders_dilation_order_as_the_reference_does():
