@@ -354,6 +354,7 @@ class Request:
     top_k: float | None = None
     temperature: float | None = None
     schedule: str | None = None
+    noise: str | None = None
     batch_size: int | None = None
     fps: float | None = None
     reaction: str | None = None
@@ -399,7 +400,7 @@ def run(request: Request) -> list[Path]:
         top_k_ratio=request.top_k or sampler["top_k_ratio"],
         temperature=sampler["temperature"] if request.temperature is None else request.temperature,
         schedule=request.schedule or sampler["schedule"],
-        noise=sampler["noise"],
+        noise=request.noise or sampler["noise"],
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

@@ -187,6 +187,7 @@ def test_generate_command_writes_samples(runs, tmp_path, capsys):
             and len(record["generator"]["sha256"]) == 16
         )
         assert record["settings"]["schedule"] == "paper"  # configs/sampler/paper.yaml
+        assert record["settings"]["noise"] == "per_sample"
         for name in ("animation.gif", "animation.mp4", "viewer.html"):
             assert (folder / name).stat().st_size > 1000
     seeds = [json.loads((f / "sample.json").read_text())["seed"] for f in folders]

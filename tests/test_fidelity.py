@@ -57,6 +57,16 @@ def test_the_reference_presets_switch_on_their_rows_and_nothing_else():
     assert vq_reference == vq_paper
 
 
+def test_the_reference_eval_preset_decodes_as_the_reference():
+    paper = _compose("eval", "eval_ckpt=x.ckpt")
+    reference = _compose("eval", "eval_ckpt=x.ckpt", "experiment=eval_reference")
+    assert (reference.sampler.schedule, reference.sampler.noise) == ("reference", "reference")
+    assert reference.reaction.iterations == 10
+    reference.sampler.schedule, reference.sampler.noise = "paper", "per_sample"
+    reference.reaction.iterations = 12
+    assert reference == paper
+
+
 def test_every_switch_of_the_table_is_named_in_it():
     table = Path(CONFIG_DIR).parent.joinpath("docs", "fidelity.md").read_text()
     for switch in (
@@ -72,5 +82,6 @@ def test_every_switch_of_the_table_is_named_in_it():
         "protocol.mm_replications",
         "experiment=gen_interhuman_reference",
         "experiment=vq_interhuman_reference",
+        "experiment=eval_reference",
     ):
         assert switch in table, switch
