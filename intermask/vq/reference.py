@@ -33,42 +33,50 @@ def _block(prefix: str, stack: int) -> Callable[[re.Match[str]], str]:
 
 _RES = r"model\.(?P<block>\d+)\.(?P<conv>conv[12])\.(?P<kind>weight|bias)"
 _KIND = r"(?P<kind>weight|bias)"
-_RULES: list[_Rule] = [
-    (re.compile(pattern), target)
-    for pattern, target in (
-        # encoder: in conv, ReLU, [strided conv, Resnet] x 2, out conv
-        (rf"encoder\.model\.0\.{_KIND}", lambda m: f"encoder.net.0.{m['kind']}"),
-        (rf"encoder\.model\.2\.0\.{_KIND}", lambda m: f"encoder.net.2.{m['kind']}"),
-        (rf"encoder\.model\.2\.1\.{_RES}", _block("encoder", 3)),
-        (rf"encoder\.model\.3\.0\.{_KIND}", lambda m: f"encoder.net.4.{m['kind']}"),
-        (rf"encoder\.model\.3\.1\.{_RES}", _block("encoder", 5)),
-        (rf"encoder\.model\.4\.{_KIND}", lambda m: f"encoder.net.6.{m['kind']}"),
-        # decoder: in conv, ReLU, [Resnet, upsample, conv] x 2, conv, ReLU, out conv
-        (rf"decoder\.model\.0\.{_KIND}", lambda m: f"decoder.net.0.{m['kind']}"),
-        (rf"decoder\.model\.2\.0\.{_RES}", _block("decoder", 2)),
-        (rf"decoder\.model\.2\.2\.{_KIND}", lambda m: f"decoder.net.4.{m['kind']}"),
-        (rf"decoder\.model\.3\.0\.{_RES}", _block("decoder", 5)),
-        (rf"decoder\.model\.3\.2\.{_KIND}", lambda m: f"decoder.net.7.{m['kind']}"),
-        (rf"decoder\.model\.4\.{_KIND}", lambda m: f"decoder.net.8.{m['kind']}"),
-        (rf"decoder\.model\.6\.{_KIND}", lambda m: f"decoder.net.10.{m['kind']}"),
-    )
-]
 _GRAPH = r"(?P<part>lin|lin_l|lin_r)\.(?P<kind>weight|bias)"
-# the graph variant: the encoder has no first conv and ReLU, so its stages start at index 0
-_GRAPH_RULES: list[_Rule] = [
-    (re.compile(pattern), target)
-    for pattern, target in (
-        (rf"encoder\.gcn_layer1\.{_GRAPH}", lambda m: f"encoder.net.0.0.{m['part']}.{m['kind']}"),
-        (rf"encoder\.gcn_layer2\.{_GRAPH}", lambda m: f"encoder.net.0.2.{m['part']}.{m['kind']}"),
-        (rf"encoder\.model\.0\.0\.{_KIND}", lambda m: f"encoder.net.2.{m['kind']}"),
-        (rf"encoder\.model\.0\.1\.{_RES}", _block("encoder", 3)),
-        (rf"encoder\.model\.1\.0\.{_KIND}", lambda m: f"encoder.net.4.{m['kind']}"),
-        (rf"encoder\.model\.1\.1\.{_RES}", _block("encoder", 5)),
-        (rf"encoder\.model\.2\.{_KIND}", lambda m: f"encoder.net.6.{m['kind']}"),
-        (rf"decoder\.gcn_layer1\.{_GRAPH}", lambda m: f"decoder.net.10.0.{m['part']}.{m['kind']}"),
-        (rf"decoder\.gcn_layer2\.{_GRAPH}", lambda m: f"decoder.net.10.2.{m['part']}.{m['kind']}"),
-    )
-] + [rule for rule in _RULES if rule[0].pattern.startswith("decoder")]
+
+
+def _kind(target: str) -> Callable[[re.Match[str]], str]:
+    return lambda m: f"{target}.{m['kind']}"
+
+
+def _graph(target: str) -> Callable[[re.Match[str]], str]:
+    return lambda m: f"{target}.{m['part']}.{m['kind']}"
+
+
+def _rules(graph_ends: bool) -> list[_Rule]:
+    """Reference key patterns -> ours. Encoder: [first layer, ReLU,] [strided conv, Resnet] x 2,
+    out conv; with graph ends the first conv and ReLU are not in ``model``, so its stages start
+    at index 0. Decoder: in conv, ReLU, [Resnet, upsample, conv] x 2, conv, ReLU, out conv (or
+    graph layers outside ``model``)."""
+    first = 0 if graph_ends else 2  # the reference encoder's index of its first stage
+    rules = [
+        (rf"encoder\.model\.{first}\.0\.{_KIND}", _kind("encoder.net.2")),
+        (rf"encoder\.model\.{first}\.1\.{_RES}", _block("encoder", 3)),
+        (rf"encoder\.model\.{first + 1}\.0\.{_KIND}", _kind("encoder.net.4")),
+        (rf"encoder\.model\.{first + 1}\.1\.{_RES}", _block("encoder", 5)),
+        (rf"encoder\.model\.{first + 2}\.{_KIND}", _kind("encoder.net.6")),
+        (rf"decoder\.model\.0\.{_KIND}", _kind("decoder.net.0")),
+        (rf"decoder\.model\.2\.0\.{_RES}", _block("decoder", 2)),
+        (rf"decoder\.model\.2\.2\.{_KIND}", _kind("decoder.net.4")),
+        (rf"decoder\.model\.3\.0\.{_RES}", _block("decoder", 5)),
+        (rf"decoder\.model\.3\.2\.{_KIND}", _kind("decoder.net.7")),
+        (rf"decoder\.model\.4\.{_KIND}", _kind("decoder.net.8")),
+    ]
+    if graph_ends:
+        rules += [
+            (rf"{end}\.gcn_layer{layer}\.{_GRAPH}", _graph(f"{end}.net.{index}.{sub}"))
+            for end, index in (("encoder", 0), ("decoder", 10))
+            for layer, sub in ((1, 0), (2, 2))
+        ]
+    else:
+        rules += [
+            (rf"encoder\.model\.0\.{_KIND}", _kind("encoder.net.0")),
+            (rf"decoder\.model\.6\.{_KIND}", _kind("decoder.net.10")),
+        ]
+    return [(re.compile(pattern), target) for pattern, target in rules]
+
+
 _CODEBOOK = re.compile(r"quantizer\.layers\.(?P<layer>\d+)\.codebook")
 
 
@@ -84,7 +92,7 @@ def convert_reference_vq(
     model's state dict) adds the missing and mis-shaped keys to the report."""
     out: dict[str, torch.Tensor] = {}
     unmapped, computed = [], []
-    rules = _GRAPH_RULES if has_graph_ends(reference) else _RULES
+    rules = _rules(has_graph_ends(reference))
     for key, value in reference.items():
         codebook = _CODEBOOK.fullmatch(key)
         if codebook is not None:
