@@ -160,7 +160,7 @@ def convert_reference(
     gen = None
     if generator is not None:  # converted in full before anything is written
         generator = Path(generator)
-        vq_checkpoint = out / "vq" / "checkpoints" / "last.ckpt"
+        vq_checkpoint = (out / "vq" / "checkpoints" / "last.ckpt").absolute()  # any working folder
         gen_config = _compose(
             "train_gen",
             [f"data={dataset}", f"experiment=gen_{dataset}", f"vq_ckpt={vq_checkpoint}"],
