@@ -95,8 +95,7 @@ def _checked(conversion: Conversion, checkpoint: Path, kind: str) -> Conversion:
 
 
 def _write_run(folder: Path, config: Any, payload: dict[str, Any]) -> Path:
-    if folder.exists():
-        raise FileExistsError(f"{folder} exists: choose another --out (nothing was overwritten)")
+    """A run folder that does not exist yet (the caller checked): config.yaml and last.ckpt."""
     with open_dict(config):
         config.paths.output_dir = str(folder)  # what a training run records as its folder
     (folder / "checkpoints").mkdir(parents=True)

@@ -13,10 +13,14 @@ from functools import lru_cache
 import torch
 
 
+def axis_frequencies(channels: int) -> torch.Tensor:
+    """(channels / 2,) float64 frequencies ``w_i = 10000^(-2i / channels)`` of one axis."""
+    return 10000.0 ** (-torch.arange(0, channels, 2, dtype=torch.float64) / channels)
+
+
 def _axis_encoding(positions: torch.Tensor, channels: int) -> torch.Tensor:
     """(P,) positions -> (P, channels): [sin(p w_0), cos(p w_0), sin(p w_1), cos(p w_1), ...]."""
-    frequencies = 10000.0 ** (-torch.arange(0, channels, 2, dtype=torch.float64) / channels)
-    angles = positions.double()[:, None] * frequencies[None, :]
+    angles = positions.double()[:, None] * axis_frequencies(channels)[None, :]
     return torch.stack([angles.sin(), angles.cos()], dim=-1).flatten(-2)
 
 

@@ -25,7 +25,8 @@ from collections.abc import Mapping
 
 import torch
 
-from intermask.utils.state_conversion import Conversion
+from intermask.interm.position import axis_frequencies
+from intermask.utils.state_conversion import Conversion, compare_with_target
 
 # reference prefix -> ours, for modules whose parameters keep their names
 _RENAMED = {
@@ -126,17 +127,8 @@ def convert_reference_generator(
             if _block_key(rest, f"blocks.{index}", value, out):
                 continue
         unmapped.append(key)
-    missing = []
-    if target is not None:
-        missing = sorted(set(target) - set(out))
-        for key in sorted(set(out) - set(target)):
-            unmapped.append(f"{key} (converted)")
-        mismatched += [
-            f"{key}: ours {tuple(target[key].shape)} vs converted {tuple(out[key].shape)}"
-            for key in sorted(set(out) & set(target))
-            if target[key].shape != out[key].shape
-        ]
-    return Conversion(out, dropped, computed, unmapped, missing, mismatched)
+    missing, extra, misshaped = compare_with_target(out, target)
+    return Conversion(out, dropped, computed, unmapped + extra, missing, mismatched + misshaped)
 
 
 def _same_frequencies(value: torch.Tensor) -> bool:
@@ -144,6 +136,5 @@ def _same_frequencies(value: torch.Tensor) -> bool:
     channels per axis, interleaved sin/cos: 10000^(-2i / C))."""
     if value.is_meta or value.ndim != 1:
         return value.ndim == 1
-    channels = 2 * value.shape[0]
-    ours = 10000.0 ** (-torch.arange(0, channels, 2, dtype=torch.float64) / channels)
+    ours = axis_frequencies(2 * value.shape[0])
     return torch.allclose(value.double(), ours, rtol=1e-6, atol=0.0)

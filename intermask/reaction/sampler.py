@@ -101,6 +101,7 @@ def generate_reaction(
     x = actor.clone()
     for n in range(steps):
         gradient = None
+        loss = {"zeta": guidance.zeta, "points_per_bone": guidance.points_per_bone}
         if guided and guidance.through_network:  # Algorithm 1: d loss(f(x_t)) / d x_t
             x1_hat, gradient = network_penetration_gradient(
                 lambda state, t=times[n]: _predict(
@@ -110,20 +111,14 @@ def generate_reaction(
                 actor_joints,
                 space,
                 frame_mask=frame_mask,
-                zeta=guidance.zeta,
-                points_per_bone=guidance.points_per_bone,
+                **loss,
             )
         else:
             x1_hat = _predict(net, x, times[n], actor, frame_mask, text, cfg_scale)
-        if guided and not guidance.through_network:
-            gradient = penetration_gradient(
-                x1_hat,
-                actor_joints,
-                space,
-                frame_mask=frame_mask,
-                zeta=guidance.zeta,
-                points_per_bone=guidance.points_per_bone,
-            )
+            if guided:  # the gradient at the clean prediction
+                gradient = penetration_gradient(
+                    x1_hat, actor_joints, space, frame_mask=frame_mask, **loss
+                )
         noise = None
         if guidance.beta > 0:
             noise = _noise(seeds, n, tuple(x.shape[1:]), x.device).to(x.dtype)

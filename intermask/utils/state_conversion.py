@@ -3,9 +3,27 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import NamedTuple
 
 import torch
+
+
+def compare_with_target(
+    converted: Mapping[str, torch.Tensor], target: Mapping[str, torch.Tensor] | None
+) -> tuple[list[str], list[str], list[str]]:
+    """(missing, extra, mismatched): ``target``'s keys that got no value, converted keys it
+    lacks (named "key (converted)") and shape mismatches; all empty when ``target`` is None."""
+    if target is None:
+        return [], [], []
+    missing = sorted(set(target) - set(converted))
+    extra = [f"{key} (converted)" for key in sorted(set(converted) - set(target))]
+    mismatched = [
+        f"{key}: ours {tuple(target[key].shape)} vs converted {tuple(converted[key].shape)}"
+        for key in sorted(set(converted) & set(target))
+        if target[key].shape != converted[key].shape
+    ]
+    return missing, extra, mismatched
 
 
 class Conversion(NamedTuple):

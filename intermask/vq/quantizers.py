@@ -166,23 +166,24 @@ class EMAQuantizer(nn.Module):
         return torch.argmin(distances, dim=-1)
 
     @torch.no_grad()
-    def _random_rows(
-        self, flat: torch.Tensor, count: int, generator: torch.Generator | None
-    ) -> torch.Tensor:
-        """``count`` encoder outputs of the global batch (all ranks' rows, gathered) drawn at
+    def _random_rows(self, flat: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
+        """One encoder output of the global batch (all ranks' rows, gathered) per code, drawn at
         random, with repetition only when the batch is small: the same rows on every rank and
         as in one process with the global batch."""
-        flat = gather_rows(flat)
+        flat, count = gather_rows(flat), self.codebook_size
         if flat.shape[0] >= count:
             order = torch.randperm(flat.shape[0], generator=generator, device=flat.device)
-            return flat[order[:count]]
-        return flat[torch.randint(flat.shape[0], (count,), generator=generator, device=flat.device)]
+            rows = flat[order[:count]]
+        else:
+            draw = torch.randint(flat.shape[0], (count,), generator=generator, device=flat.device)
+            rows = flat[draw]
+        if process_group()[1] > 1:  # the ranks drew the same rows; rank 0's copy makes it exact
+            dist.broadcast(rows, src=0)
+        return rows
 
     @torch.no_grad()
     def _initialise(self, flat: torch.Tensor, generator: torch.Generator | None) -> None:
-        rows = self._random_rows(flat.float(), self.codebook_size, generator)
-        if process_group()[1] > 1:  # the ranks drew the same rows; rank 0's copy makes it exact
-            dist.broadcast(rows, src=0)
+        rows = self._random_rows(flat.float(), generator)
         self.codebook.copy_(rows)
         self.ema_sum.copy_(rows)
         self.ema_count.fill_(1.0)
@@ -212,9 +213,7 @@ class EMAQuantizer(nn.Module):
         self.codebook.copy_(self.ema_sum / smoothed[:, None])
         dead = self.ema_count < self.reset_threshold
         if dead.any():
-            replacement = self._random_rows(flat, self.codebook_size, generator)
-            if process_group()[1] > 1:
-                dist.broadcast(replacement, src=0)
+            replacement = self._random_rows(flat, generator)
             self.codebook[dead] = replacement[dead]
             self.ema_sum[dead] = replacement[dead]
             self.ema_count[dead] = 1.0
@@ -227,9 +226,7 @@ class EMAQuantizer(nn.Module):
         """The reference's codebook after the EMA step: sum / count where the count reaches the
         threshold, a fresh random encoder output elsewhere (statistics untouched)."""
         used = self.ema_count >= self.reset_threshold
-        replacement = self._random_rows(flat, self.codebook_size, generator)
-        if process_group()[1] > 1:
-            dist.broadcast(replacement, src=0)
+        replacement = self._random_rows(flat, generator)
         means = self.ema_sum / self.ema_count.clamp_min(torch.finfo(flat.dtype).tiny)[:, None]
         self.codebook.copy_(torch.where(used[:, None], means, replacement))
         return (~used).sum()

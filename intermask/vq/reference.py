@@ -21,7 +21,7 @@ from collections.abc import Callable, Mapping
 
 import torch
 
-from intermask.utils.state_conversion import Conversion
+from intermask.utils.state_conversion import Conversion, compare_with_target
 
 _Rule = tuple[re.Pattern[str], Callable[[re.Match[str]], str]]
 
@@ -110,13 +110,5 @@ def convert_reference_vq(
                 break
         else:
             unmapped.append(key)
-    missing, mismatched = [], []
-    if target is not None:
-        missing = sorted(set(target) - set(out))
-        unmapped += [f"{key} (converted)" for key in sorted(set(out) - set(target))]
-        mismatched = [
-            f"{key}: ours {tuple(target[key].shape)} vs converted {tuple(out[key].shape)}"
-            for key in sorted(set(out) & set(target))
-            if target[key].shape != out[key].shape
-        ]
-    return Conversion(out, [], computed, unmapped, missing, mismatched)
+    missing, extra, mismatched = compare_with_target(out, target)
+    return Conversion(out, [], computed, unmapped + extra, missing, mismatched)
