@@ -4,7 +4,8 @@ Every ``every_n_epochs`` validations, :class:`PeriodicProtocol` runs ``replicati
 replications of the protocol (GT and generated rows, no MultiModality) on a split of the
 training DataModule with a frozen evaluator, and logs ``protocol/{top1,top2,top3,fid,mm_dist,
 diversity,success}`` of the generated row, the GT row's ``protocol/gt_top3``, and
-``protocol/hours`` (wall time since the fit started). That is the curve of a long run, and a
+``protocol/hours`` (wall time of the fit, summed over the runs it resumed from: the clock and the
+count of validations travel in the checkpoint). That is the curve of a long run, and a
 checkpoint monitor can select on ``protocol/fid`` or ``protocol/top3``. Rank zero only.
 """
 
@@ -65,10 +66,22 @@ class PeriodicProtocol(Callback):
         self.success = success or SuccessThresholds()
         self._evaluator = None
         self._validations = 0
+        self._hours_before = 0.0  # wall hours of the runs this fit resumed from
         self._started = time.monotonic()
 
     def on_fit_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self._started = time.monotonic()
+
+    def hours(self) -> float:
+        """Wall hours of the fit so far, including the runs it resumed from."""
+        return self._hours_before + (time.monotonic() - self._started) / 3600
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"validations": self._validations, "hours": self.hours()}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        self._validations = int(state_dict["validations"])
+        self._hours_before = float(state_dict["hours"])
 
     def _load_evaluator(self, device: torch.device):
         if self._evaluator is None:
@@ -84,7 +97,7 @@ class PeriodicProtocol(Callback):
         if self._validations % self.every_n_epochs or not trainer.is_global_zero:
             return
         values = self.evaluate(trainer.datamodule, pl_module)
-        hours = (time.monotonic() - self._started) / 3600
+        hours = self.hours()
         for name, value in values.items():
             pl_module.log(f"protocol/{name}", value, rank_zero_only=True)
         pl_module.log("protocol/hours", hours, rank_zero_only=True)

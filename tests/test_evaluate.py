@@ -357,3 +357,23 @@ def test_periodic_protocol_rejects_bad_settings(tmp_path):
         PeriodicProtocol(
             evaluator=str(tmp_path / "e.ckpt"), constants=ProtocolConstants(), split="dev"
         )
+
+
+def test_periodic_protocol_clock_and_count_continue_after_a_resume(tmp_path, monkeypatch):
+    from callbacks import protocol as module
+    from intermask.evaluation.protocol import ProtocolConstants
+
+    (tmp_path / "e.ckpt").write_bytes(b"")
+    clock = iter([100.0, 100.0 + 1800.0, 5000.0, 5000.0 + 900.0])
+    monkeypatch.setattr(module.time, "monotonic", lambda: next(clock))
+    first = module.PeriodicProtocol(evaluator=str(tmp_path / "e.ckpt"), constants=ProtocolConstants())
+    first._validations = 3
+    state = first.state_dict()  # half an hour after the first run's start
+    assert state == {"validations": 3, "hours": 0.5}
+
+    resumed = module.PeriodicProtocol(
+        evaluator=str(tmp_path / "e.ckpt"), constants=ProtocolConstants()
+    )
+    resumed.load_state_dict(state)
+    assert resumed._validations == 3
+    assert resumed.hours() == pytest.approx(0.5 + 900.0 / 3600)  # 15 more minutes
