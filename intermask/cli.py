@@ -212,6 +212,11 @@ def _add_generate_parser(commands) -> None:
         choices=("per_sample", "reference"),
         help="sampling draws: one generator per sample (default) or the reference code's",
     )
+    parser.add_argument(
+        "--persons",
+        choices=("together", "in_turn"),
+        help="both persons every pass (default, the paper) or person A first, then B given A",
+    )
     parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
     parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")
     parser.add_argument("--batch-size", type=_positive_int, help="samples per forward batch (32)")

@@ -27,6 +27,7 @@ from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
     NOISE,
+    PERSONS,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -50,6 +51,7 @@ class Settings:
     temperature: float = TEMPERATURE
     schedule: str = SCHEDULE
     noise: str = NOISE
+    persons: str = PERSONS
     batch_size: int = 32
     fps: float = 30.0
 
@@ -195,6 +197,7 @@ def generate_samples(
         temperature=settings.temperature,
         schedule=settings.schedule,
         noise=settings.noise,
+        persons=settings.persons,
     )
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
@@ -355,6 +358,7 @@ class Request:
     temperature: float | None = None
     schedule: str | None = None
     noise: str | None = None
+    persons: str | None = None
     batch_size: int | None = None
     fps: float | None = None
     reaction: str | None = None
@@ -401,6 +405,7 @@ def run(request: Request) -> list[Path]:
         temperature=sampler["temperature"] if request.temperature is None else request.temperature,
         schedule=request.schedule or sampler["schedule"],
         noise=request.noise or sampler["noise"],
+        persons=request.persons or sampler["persons"],
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

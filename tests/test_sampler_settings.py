@@ -10,6 +10,7 @@ from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
     NOISE,
+    PERSONS,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -23,6 +24,7 @@ LIBRARY = {
     "temperature": TEMPERATURE,
     "schedule": SCHEDULE,
     "noise": NOISE,
+    "persons": PERSONS,
 }
 
 

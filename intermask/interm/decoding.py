@@ -12,6 +12,15 @@ sample). A token that survives a re-masking is never masked again; after the las
 ``k`` it masks ``max(1, round(gamma(k / (I - 1)) * n))`` tokens, so the last iteration re-predicts
 the single least confident token (docs/fidelity.md).
 
+``persons="in_turn"`` (this framework's switch, off by default) decodes a collaborative model's
+persons one after the other: person A's ``I`` iterations with person B all [MASK], then B's
+``I`` iterations conditioned on A's finished tokens, as in reaction generation. The model is
+permutation-equivariant, so from an all-[MASK] start both persons get the same prediction; when
+the two roles of an interaction differ, tokens committed in the same iteration can take one
+role in one person and the other role in the other, or the same role in both (both persons at the
+actor's place). Decoding A first commits one role before B is drawn (docs/learning.md, seventh
+pass).
+
 Interaction generation generates everything; reaction generation fixes person A's tokens
 (appendix G, "the reference tokens remain unmasked throughout"); inpainting (MoMask) fixes every
 token outside a region.
@@ -44,6 +53,8 @@ SCHEDULE = "paper"  # re-masking counts: "paper" (eq. 3, ceil) or "reference" (M
 SCHEDULES = ("paper", "reference")
 NOISE = "per_sample"  # "per_sample" (each sample its own generator) or "reference" (see generate)
 NOISES = ("per_sample", "reference")
+PERSONS = "together"  # "together" (section 3.3: both persons each pass) or "in_turn" (see generate)
+PERSON_ORDERS = ("together", "in_turn")
 
 
 class Edit(NamedTuple):
@@ -347,6 +358,7 @@ def generate(
     edit: Edit | None = None,
     schedule: str = SCHEDULE,
     noise: str = NOISE,
+    persons: str = PERSONS,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -373,6 +385,9 @@ def generate(
             the batch in the reference's order (``torch.multinomial``), so that with the
             reference schedule and the same seed the reference's tokens come out; a sample then
             depends on its batch.
+        persons: "together" (the paper: both persons in every pass) or "in_turn": ``iterations``
+            passes for person A with B all [MASK], then ``iterations`` for B given A (2I passes;
+            the module docstring says why). An alternative-modeling model always decodes in turn.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
@@ -385,6 +400,8 @@ def generate(
         raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
     if noise not in NOISES:
         raise ValueError(f"noise must be one of {NOISES}, got {noise!r}")
+    if persons not in PERSON_ORDERS:
+        raise ValueError(f"persons must be one of {PERSON_ORDERS}, got {persons!r}")
     for given in (reference_tokens, None if edit is None else edit.tokens):
         if given is not None and steps is None:
             steps = given.shape[-1]
@@ -413,6 +430,12 @@ def generate(
         )
         if model.modeling == "alternative":
             tokens = _decode_alternative(model, tokens, undecided, iterations, settings)
+        elif persons == "in_turn":
+            for person in (0, 1):  # B's undecided tokens stay [MASK] while A is decoded
+                own = undecided.clone()
+                own[:, 1 - person] = False
+                if bool(own.any()):
+                    tokens = _decode_collaborative(model, tokens, own, iterations, settings)
         else:
             tokens = _decode_collaborative(model, tokens, undecided, iterations, settings)
     finally:

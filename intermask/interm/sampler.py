@@ -16,6 +16,7 @@ from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
     NOISE,
+    PERSONS,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -59,8 +60,8 @@ def joints_from_features(vq: MotionVQVAE, features: torch.Tensor) -> torch.Tenso
 class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
-    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule`` and ``noise`` default to
-    the paper's inference settings (section 3.3, appendix C.1).
+    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise`` and
+    ``persons`` default to the paper's inference settings (section 3.3, appendix C.1).
     """
 
     def __init__(
@@ -75,11 +76,12 @@ class InteractionSampler:
         temperature: float = TEMPERATURE,
         schedule: str = SCHEDULE,
         noise: str = NOISE,
+        persons: str = PERSONS,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
         self.iterations, self.cfg_scale = iterations, cfg_scale
         self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
-        self.noise = noise
+        self.noise, self.persons = noise, persons
 
     @property
     def device(self) -> torch.device:
@@ -132,6 +134,7 @@ class InteractionSampler:
             temperature=self.temperature,
             schedule=self.schedule,
             noise=self.noise,
+            persons=self.persons,
             seeds=seeds,
             reference_tokens=reference_tokens,
             edit=edit,
