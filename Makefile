@@ -106,7 +106,7 @@ demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator,
 		vq_ckpt=$(DEMO_DIR)/vq/checkpoints/last.ckpt
 	$(PY) -m intermask.evaluate experiment=eval_demo hydra.run.dir=$(DEMO_DIR)/eval gen_ckpt=$(DEMO_DIR)/gen \
 		eval_ckpt=$$(ls $(DEMO_DIR)/evaluator/checkpoints/best*.ckpt | head -n 1)
-	$(VENV)/bin/intermask generate --checkpoint $(DEMO_DIR)/gen $(DEMO_PROMPTS) --seconds 3.2 --samples 2 \
+	$(VENV)/bin/intermask generate --checkpoint $(DEMO_DIR)/gen $(DEMO_PROMPTS) --seconds 3.2 --samples 2 --persons in_turn \
 		--out $(DEMO_DIR)/samples
 	@echo; cat $(DEMO_DIR)/eval/results.md
 	@echo; echo "demo done: table $(DEMO_DIR)/eval/results.md; checkpoints $(DEMO_DIR)/{evaluator,vq,gen}/checkpoints;" \

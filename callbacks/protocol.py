@@ -37,8 +37,9 @@ class PeriodicProtocol(Callback):
             run per evaluation.
         split: the DataModule split evaluated ("val" keeps the test split for the final table).
         every_n_epochs: evaluate after every n-th validation (the sanity check never does).
-        iterations: decoding iterations of the generated row (the sampler's other settings are
-            the paper's).
+        iterations: decoding iterations of the generated row (per person when ``persons`` is
+            "in_turn"; the sampler's other settings are the paper's).
+        persons: "together" (the paper) or "in_turn" (intermask.interm.decoding).
         success: thresholds of the interaction-success predicates (labelled synthetic data).
     """
 
@@ -50,6 +51,7 @@ class PeriodicProtocol(Callback):
         split: str = "val",
         every_n_epochs: int = 1,
         iterations: int = 10,
+        persons: str = "together",
         success: SuccessThresholds | None = None,
     ) -> None:
         if every_n_epochs < 1 or iterations < 1:
@@ -63,6 +65,7 @@ class PeriodicProtocol(Callback):
             raise FileNotFoundError(f"{self.evaluator_path}: evaluator checkpoint not found")
         self.constants, self.split = constants, split
         self.every_n_epochs, self.iterations = every_n_epochs, iterations
+        self.persons = persons
         self.success = success or SuccessThresholds()
         self._evaluator = None
         self._validations = 0
@@ -109,7 +112,7 @@ class PeriodicProtocol(Callback):
         """Generated row's means over the replications (+ ``gt_top3``, ``gt_success``)."""
         device = pl_module.device
         evaluator = self._load_evaluator(device)
-        sampler = pl_module.sampler(iterations=self.iterations)
+        sampler = pl_module.sampler(iterations=self.iterations, persons=self.persons)
         was_training = pl_module.training
         pl_module.eval()
         batch_size = self.constants.eval_batch_size

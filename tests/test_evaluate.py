@@ -366,7 +366,9 @@ def test_periodic_protocol_clock_and_count_continue_after_a_resume(tmp_path, mon
     (tmp_path / "e.ckpt").write_bytes(b"")
     clock = iter([100.0, 100.0 + 1800.0, 5000.0, 5000.0 + 900.0])
     monkeypatch.setattr(module.time, "monotonic", lambda: next(clock))
-    first = module.PeriodicProtocol(evaluator=str(tmp_path / "e.ckpt"), constants=ProtocolConstants())
+    first = module.PeriodicProtocol(
+        evaluator=str(tmp_path / "e.ckpt"), constants=ProtocolConstants()
+    )
     first._validations = 3
     state = first.state_dict()  # half an hour after the first run's start
     assert state == {"validations": 3, "hours": 0.5}

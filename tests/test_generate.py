@@ -103,6 +103,11 @@ def test_cli_reports_an_unknown_checkpoint(tmp_path, capsys):
             "momask",
             r"invalid choice: 'momask' \(choose from '?paper'?, '?reference'?\)",
         ),
+        (
+            "--persons",
+            "alone",
+            r"invalid choice: 'alone' \(choose from '?together'?, '?in_turn'?\)",
+        ),
     ],
 )
 def test_cli_numbers_are_checked_before_any_work(tmp_path, capsys, option, value, message):

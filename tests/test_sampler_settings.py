@@ -35,4 +35,5 @@ def test_generate_and_eval_compose_the_library_defaults():
         paper = compose("eval", overrides=["eval_ckpt=x.ckpt"])
         demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
     assert dict(paper.sampler) == LIBRARY
-    assert dict(demo.sampler) == {**LIBRARY, "iterations": 10}  # the demo's one change
+    # the demo's changes: persons in turn, 5 iterations each (the passes of 10 together)
+    assert dict(demo.sampler) == {**LIBRARY, "iterations": 5, "persons": "in_turn"}

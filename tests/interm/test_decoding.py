@@ -206,3 +206,52 @@ def test_reference_noise_is_the_references_multinomial_draw_over_the_batch(tiny)
     assert not torch.equal(alone[0], together[0])  # the batch changes the draws
     with pytest.raises(ValueError, match=r"noise must be one of \('per_sample', 'reference'\)"):
         _run(model, text, noise="global")
+
+
+def test_in_turn_decodes_person_a_with_b_masked_then_b_given_a(tiny, monkeypatch):
+    """persons="in_turn": I passes in which B is all [MASK] and only A's tokens are committed,
+    then I passes in which A is final and only B's are; the paper's schedule within each."""
+    from intermask.interm import decoding
+
+    model, text = tiny
+    mask = model.vocabulary.mask_id
+    seen = []
+    original = decoding.guided_logits
+
+    def recording(model, tokens, *args, **kwargs):
+        seen.append(((tokens[:, 0] == mask).flatten(1).sum(1), (tokens[:, 1] == mask).flatten(1)))
+        return original(model, tokens, *args, **kwargs)
+
+    monkeypatch.setattr(decoding, "guided_logits", recording)
+    tokens = _run(model, text, persons="in_turn")
+    per_person = [ROWS * int(length) for length in LENGTHS]
+    assert len(seen) == 2 * ITERATIONS
+    for i, (masked_a, masked_b) in enumerate(seen[:ITERATIONS]):  # person A's turn
+        gamma = 1.0 if i == 0 else math.cos(math.pi / 2 * i / ITERATIONS)
+        assert masked_a.tolist() == [math.ceil(gamma * n - 1e-9) for n in per_person]
+        assert masked_b.sum(1).tolist() == per_person  # B waits, all [MASK]
+    for i, (masked_a, masked_b) in enumerate(seen[ITERATIONS:]):  # person B's turn, A final
+        gamma = 1.0 if i == 0 else math.cos(math.pi / 2 * i / ITERATIONS)
+        assert masked_a.tolist() == [0, 0, 0]
+        assert masked_b.sum(1).tolist() == [math.ceil(gamma * n - 1e-9) for n in per_person]
+    valid = _valid()
+    assert ((tokens[valid] >= 0) & (tokens[valid] < K)).all() and (tokens[~valid] == -1).all()
+    assert not torch.equal(tokens, _run(model, text))  # a different decoding from "together"
+
+
+def test_in_turn_keeps_fixed_tokens_and_is_checked(tiny):
+    model, text = tiny
+    reference = torch.randint(0, K, (3, ROWS, STEPS), generator=torch.Generator().manual_seed(8))
+    valid = _valid()
+    # a reaction has only B to decode: in turn is the same decoding as together
+    together = _run(model, text, reference_tokens=reference)
+    assert torch.equal(_run(model, text, reference_tokens=reference, persons="in_turn"), together)
+    fixed = torch.randint(0, K, (3, 2, ROWS, STEPS), generator=torch.Generator().manual_seed(9))
+    region = torch.zeros(3, 2, ROWS, STEPS, dtype=torch.bool)
+    region[:, :, :, 1:3] = True
+    tokens = _run(model, text, edit=Edit(fixed, region), persons="in_turn")
+    assert torch.equal(tokens[valid & ~region], fixed[valid & ~region])
+    with pytest.raises(
+        ValueError, match=r"persons must be one of \('together', 'in_turn'\), got 'alone'"
+    ):
+        _run(model, text, persons="alone")
