@@ -6,7 +6,10 @@ Masks are boolean tensors of the same shape, True where a token is masked (predi
 
 Stage 1 (eq. 3): with probability ``p_r`` random masking of both persons with ratio
 ``gamma(tau) = cos(pi * tau / 2)``, ``tau ~ U(0, 1)``; otherwise interaction masking (every
-token of one person). The masked positions are then corrupted BERT-style. Stage 2 (step
+token of one person). This framework adds solo masking, off by default (``p_solo``): one person
+wholly masked, the other randomly masked as in eq. 3, which is what decoding the persons in turn
+asks of the model (person A is decoded while B is all [MASK]). The masked positions are then
+corrupted BERT-style. Stage 2 (step
 unroll, after Kim et al. 2023b): the least confident of the stage-1 predictions are re-masked
 with the ratio of the next step and predicted again.
 """
@@ -145,24 +148,51 @@ def interaction_masking(
     return valid & chosen[:, :, None, None]
 
 
+def solo_masking(
+    tokens_a: torch.Tensor,
+    tokens_b: torch.Tensor,
+    lengths_in_steps: torch.Tensor,
+    *,
+    tau: torch.Tensor,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """Solo masking -> (B, 2, rows, T') bool mask: every valid token of one person, chosen
+    uniformly per sample, as if that person were still to come; of the other person's ``n``
+    valid tokens ``ceil(gamma(tau) * n)``, at least one, chosen uniformly."""
+    tokens = stack_persons(tokens_a, tokens_b)
+    valid = valid_tokens(tokens, lengths_in_steps)
+    absent = (_rand((tokens.shape[0],), tokens, generator) < 0.5).long()  # (B,)
+    hidden = (torch.arange(2, device=tokens.device)[None, :] == absent[:, None])[:, :, None, None]
+    present = valid & ~hidden
+    count = scheduled_count(
+        cosine_schedule(tau).to(tokens.device), present.flatten(1).sum(1), minimum=1
+    )
+    scores = _rand(tuple(tokens.shape), tokens, generator).masked_fill(~present, math.inf)
+    return (lowest_ranks(scores, count) & present) | (valid & hidden)
+
+
 def training_mask(
     tokens_a: torch.Tensor,
     tokens_b: torch.Tensor,
     lengths_in_steps: torch.Tensor,
     *,
     p_random: float = P_RANDOM,
+    p_solo: float = 0.0,
     generator: torch.Generator | None = None,
 ) -> TrainingMask:
     """Stage-1 mask: per sample random masking with probability ``p_random`` (p_r = 0.8 in the
-    paper), interaction masking otherwise.
+    paper), otherwise interaction masking, or solo masking for a ``p_solo`` share of those
+    samples (0, the paper, draws nothing for it: the random stream is the paper setting's).
 
     ``tau`` is the sampled progress for random masking and ``gamma^-1(0.5) = 2/3`` for
-    interaction masking (half of the valid tokens are hidden). The reference draws one
+    interaction masking (half of the valid tokens are hidden); for solo masking, the progress
+    whose ratio is the share of valid tokens it hides. The reference draws one
     interaction/random decision per batch and masks person A in one half of the batch and
     person B in the other; we decide per sample.
     """
-    if not 0.0 <= p_random <= 1.0:
-        raise ValueError(f"p_random must lie in [0, 1], got {p_random}")
+    for name, prob in (("p_random", p_random), ("p_solo", p_solo)):
+        if not 0.0 <= prob <= 1.0:
+            raise ValueError(f"{name} must lie in [0, 1], got {prob}")
     batch = tokens_a.shape[0]
     tau = _rand((batch,), tokens_a, generator).double()
     is_random = _rand((batch,), tokens_a, generator) < p_random
@@ -170,6 +200,14 @@ def training_mask(
     interaction = interaction_masking(tokens_a, tokens_b, lengths_in_steps, generator=generator)
     mask = torch.where(is_random[:, None, None, None], random, interaction)
     tau = torch.where(is_random, tau, torch.full_like(tau, INTERACTION_TAU))
+    if p_solo > 0:
+        is_solo = ~is_random & (_rand((batch,), tokens_a, generator) < p_solo)
+        solo_tau = _rand((batch,), tokens_a, generator).double()
+        solo = solo_masking(tokens_a, tokens_b, lengths_in_steps, tau=solo_tau, generator=generator)
+        mask = torch.where(is_solo[:, None, None, None], solo, mask)
+        valid = valid_tokens(stack_persons(tokens_a, tokens_b), lengths_in_steps)
+        share = solo.flatten(1).sum(1).double() / valid.flatten(1).sum(1).clamp(min=1).double()
+        tau = torch.where(is_solo, inverse_cosine_schedule(share), tau)
     return TrainingMask(mask, tau, is_random)
 
 

@@ -113,6 +113,8 @@ class InterMModule(LossStepsModule):
         text: feature cache in front of the frozen CLIP text encoder; not checkpointed.
         optimizer: partial optimizer taking the parameters (paper: AdamW lr 2e-4).
         p_random: p_r, random- vs interaction-masking probability (section 3.2.1, 0.8).
+        p_solo: share of the samples not randomly masked that get solo masking instead of
+            interaction masking (:mod:`intermask.interm.masking`; 0, the paper).
         condition_drop: per-sample probability of the null condition (classifier-free
             guidance, 0.1).
         step_unroll: add the second, step-unroll pass (section 3.2.1 stage 2).
@@ -140,6 +142,7 @@ class InterMModule(LossStepsModule):
         optimizer: Callable[..., Optimizer],
         warmup_fraction: float,
         p_random: float = P_RANDOM,
+        p_solo: float = 0.0,
         condition_drop: float = 0.1,
         step_unroll: bool = True,
         lr_milestones: Sequence[float] = (0.5, 0.7, 0.85),
@@ -163,7 +166,11 @@ class InterMModule(LossStepsModule):
             raise ValueError(
                 f"net.text_dim ({net.text_dim}) must equal the text encoder width ({text.encoder.width})"
             )
-        for name, prob in (("p_random", p_random), ("condition_drop", condition_drop)):
+        for name, prob in (
+            ("p_random", p_random),
+            ("p_solo", p_solo),
+            ("condition_drop", condition_drop),
+        ):
             if not 0.0 <= prob <= 1.0:
                 raise ValueError(f"{name} must lie in [0, 1], got {prob}")
         if not 0.0 <= warmup_fraction < 1.0:
@@ -183,6 +190,7 @@ class InterMModule(LossStepsModule):
         self.save_hyperparameters(
             {
                 "p_random": float(p_random),
+                "p_solo": float(p_solo),
                 "condition_drop": float(condition_drop),
                 "step_unroll": bool(step_unroll),
                 "warmup_fraction": float(warmup_fraction),
@@ -323,6 +331,7 @@ class InterMModule(LossStepsModule):
             layout[:, 1],
             every_length,
             p_random=self.hparams.p_random,
+            p_solo=self.hparams.get("p_solo", 0.0),  # checkpoints from before the switch: 0
             generator=generator,
         )
         corrupted = bert_corruption(layout, masking.mask, vocabulary, generator=generator).tokens

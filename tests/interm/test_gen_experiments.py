@@ -18,6 +18,7 @@ PAPER = {
     "use_spatio_temporal_attention": True,
     "use_cross_attention": True,
     "p_random": 0.8,
+    "p_solo": 0.0,
     "step_unroll": True,
 }
 EXPERIMENTS = {

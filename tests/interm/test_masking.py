@@ -10,6 +10,7 @@ from intermask.interm.masking import (
     interaction_masking,
     inverse_cosine_schedule,
     random_masking,
+    solo_masking,
     step_unroll_mask,
     training_mask,
     valid_tokens,
@@ -103,6 +104,57 @@ def test_training_mask_mixes_with_p_random_and_reports_tau():
     assert ((out.tau[out.is_random] >= 0) & (out.tau[out.is_random] <= 1)).all()
     with pytest.raises(ValueError, match="p_random must lie in"):
         training_mask(a, b, lengths, p_random=1.5)
+
+
+def test_solo_masking_hides_one_person_and_masks_the_other_on_the_schedule():
+    batch = 400
+    lengths = torch.randint(1, STEPS + 1, (batch,), generator=torch.Generator().manual_seed(1))
+    a, b = _tokens(batch, lengths)
+    tau = torch.rand(batch, generator=torch.Generator().manual_seed(2)).double()
+    mask = solo_masking(a, b, lengths, tau=tau, generator=torch.Generator().manual_seed(3))
+    valid = valid_tokens(torch.stack([a, b], 1), lengths)
+    assert not (mask & ~valid).any()  # padding is never masked
+    whole = (mask | ~valid).flatten(2).all(2)  # (B, 2) persons wholly masked
+    absent = whole[:, 1].long()  # person B when both are (a one-token person), else the whole one
+    assert whole.any(1).all()
+    present = 1 - absent
+    count = mask[torch.arange(batch), present].flatten(1).sum(1)
+    n = valid[torch.arange(batch), present].flatten(1).sum(1)
+    expected = torch.ceil(cosine_schedule(tau) * n.double() - 1e-9).clamp(min=1)
+    assert torch.equal(count.double(), torch.minimum(expected, n.double()))
+    one = whole.sum(1) == 1  # the absent person is known where the other is not wholly masked
+    assert one.sum() > batch // 2 and 0.4 < absent[one].double().mean() < 0.6
+
+
+def test_training_mask_with_p_solo_mixes_three_kinds_and_keeps_the_paper_stream():
+    batch = 2000
+    lengths = torch.full((batch,), STEPS)
+    a, b = _tokens(batch, lengths)
+    paper = training_mask(a, b, lengths, generator=torch.Generator().manual_seed(5))
+    same = training_mask(a, b, lengths, p_solo=0.0, generator=torch.Generator().manual_seed(5))
+    assert torch.equal(paper.mask, same.mask) and torch.equal(paper.tau, same.tau)
+    out = training_mask(
+        a, b, lengths, p_random=0.5, p_solo=0.5, generator=torch.Generator().manual_seed(5)
+    )
+    assert torch.equal(
+        out.is_random,
+        training_mask(
+            a, b, lengths, p_random=0.5, generator=torch.Generator().manual_seed(5)
+        ).is_random,
+    )  # the same random-masking draw
+    hidden = out.mask.flatten(2).all(2)  # (B, 2) persons wholly masked
+    per_person = out.mask.flatten(2).sum(2)  # (B, 2)
+    n = ROWS * STEPS
+    other = per_person.sum(1) - n  # tokens masked in the other person of a one-person sample
+    interaction = ~out.is_random & hidden.any(1) & (other == 0)
+    solo = ~out.is_random & ~interaction
+    assert 0.2 < solo.double().mean() < 0.3 and 0.2 < interaction.double().mean() < 0.3
+    assert (hidden[solo].sum(1) >= 1).all() and (other[solo] >= 1).all()
+    share = out.mask[solo].flatten(1).sum(1).double() / (2 * n)
+    torch.testing.assert_close(out.tau[solo], inverse_cosine_schedule(share))
+    assert (out.tau[interaction] == INTERACTION_TAU).all()
+    with pytest.raises(ValueError, match="p_solo must lie in \\[0, 1\\], got -0.1"):
+        training_mask(a, b, lengths, p_solo=-0.1)
 
 
 def test_bert_corruption_proportions():
