@@ -88,6 +88,9 @@ def test_long_cpu_run_is_the_demo_network_trained_longer_and_scored_every_1000_s
     # 100 steps an epoch: a validation every 1,000 steps, each followed by the protocol
     assert cfg.trainer.check_val_every_n_epoch == 10 and cfg.callbacks.protocol.every_n_epochs == 1
     assert cfg.callbacks.model_checkpoint.monitor == "protocol/fid"
+    # scored with the demo protocol's decoding: persons in turn, 5 iterations each
+    protocol = cfg.callbacks.protocol
+    assert (protocol.persons, protocol.iterations) == ("in_turn", 5)
 
 
 def test_demo_setting_keeps_the_paper_switches_on_a_cpu_sized_network():
