@@ -1,12 +1,14 @@
-"""Dataset readers (InterHuman, Inter-X, synthetic), normalization, windowing, validation, DataModule.
+"""Dataset readers (InterHuman, Inter-X, HumanML3D, synthetic), normalization, windowing, validation, DataModule.
 
 Shapes: P persons (2), T frames, C channels. InterHuman items carry (P, T, 262) features,
-Inter-X items (P, T, 56, 6); VQ windows are single-person (T, C...).
+Inter-X items (P, T, 56, 6), HumanML3D items (T, 263) (one person); VQ windows are
+single-person (T, C...).
 """
 
 from intermask.data.captions import swap_left_right
 from intermask.data.common import EpochSampler, item_rng
 from intermask.data.errors import DataError, DataProblem, SkippedClip
+from intermask.data.humanml3d import HumanML3DDataset
 from intermask.data.interhuman import InterHumanDataset
 from intermask.data.interx import InterXDataset
 from intermask.data.item import ExportedItem, export_item, load_item
@@ -35,6 +37,7 @@ __all__ = [
     "DataProblem",
     "EpochSampler",
     "ExportedItem",
+    "HumanML3DDataset",
     "InterHumanDataset",
     "InterXDataset",
     "InteractionDataModule",
