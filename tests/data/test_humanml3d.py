@@ -1,8 +1,7 @@
 """HumanML3D reader: hand-made clips in the official layout, read back through the reader.
 
-The 263-d vectors are built here from joint positions with our own forward construction (the
-reference processing's conventions, written with rotation matrices), independent of
-``intermask.motion.humanml3d``.
+The 263-d vectors are built from joint positions by
+``intermask.motion.humanml3d.features_from_positions`` (the reference processing's conventions).
 """
 
 import logging
@@ -15,8 +14,8 @@ import torch
 
 from intermask.data.errors import DataError
 from intermask.data.humanml3d import HumanML3DDataset, read_tagged_captions, subclip_tag
-from intermask.motion.humanml3d import recover_from_ric
-from intermask.motion.rotations import matrix_to_quaternion, rotation_about_axis
+from intermask.motion.humanml3d import features_from_positions, recover_from_ric
+from intermask.motion.rotations import rotation_about_axis
 from intermask.motion.skeleton import rest_pose_positions
 
 WHOLE = "a person walks forward.#a/DET person/NOUN walk/VERB forward/ADV#0.0#0.0"
@@ -37,39 +36,6 @@ def turning_walk(frames: int) -> torch.Tensor:
         (0.02 * t + 0.1 * torch.sin(0.05 * t), 0.9 + 0.02 * torch.sin(0.3 * t), 0.03 * t), -1
     )
     return torch.einsum("tij,tkj->tki", rotation_about_axis(yaw, "y"), body) + root[:, None]
-
-
-def forward_features(positions: torch.Tensor) -> torch.Tensor:
-    """(T + 1, 22, 3) positions -> (T, 263) vectors, the reference construction: the heading R_t
-    turns the world so the body faces +Z; root steps in the heading of the frame they end in."""
-    frames = positions.shape[0] - 1
-    across = positions[:, 2] - positions[:, 1]  # r_hip - l_hip
-    forward = torch.linalg.cross(
-        torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64).expand_as(across), across
-    )
-    heading = rotation_about_axis(-torch.atan2(forward[:, 0], forward[:, 2]), "y")  # (T+1, 3, 3)
-    relative = matrix_to_quaternion(heading[1:] @ heading[:-1].transpose(-1, -2))
-    rot_velocity = torch.arcsin(relative[:, 2:3])  # half the yaw change, as released
-    root = positions[:, 0]
-    step = torch.einsum("tij,tj->ti", heading[1:], root[1:] - root[:-1])
-    ground = root * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64)
-    ric = torch.einsum("tij,tkj->tki", heading, positions[:, 1:] - ground[:, None])
-    local_velocity = torch.einsum("tij,tkj->tki", heading[:-1], positions[1:] - positions[:-1])
-    rotations = torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0], dtype=torch.float64).repeat(frames, 21)
-    feet = positions[1:, [7, 10, 8, 11]] - positions[:-1, [7, 10, 8, 11]]
-    contacts = ((feet**2).sum(-1) < 0.002).double()
-    return torch.cat(
-        (
-            rot_velocity[:frames],
-            step[:, [0, 2]],
-            root[:frames, 1:2],
-            ric[:frames].reshape(frames, 63),
-            rotations,
-            local_velocity.reshape(frames, 66),
-            contacts,
-        ),
-        dim=-1,
-    )
 
 
 def random_clip(frames: int, seed: int) -> np.ndarray:
@@ -104,7 +70,13 @@ def write_dataset(
 @pytest.fixture(scope="module")
 def walk():
     positions = turning_walk(81)
-    return positions, forward_features(positions)
+    motion = features_from_positions(positions)
+    # The canonical joints are the walk moved rigidly (turned about +Y, shifted, floored).
+    distances = torch.cdist(positions[:80].flatten(0, 1), positions[:80].flatten(0, 1))
+    moved = motion.joints.flatten(0, 1)
+    torch.testing.assert_close(torch.cdist(moved, moved), distances)
+    assert float(motion.joints[..., 1].min()) == 0.0
+    return motion.joints, motion.features
 
 
 def test_hand_made_clip_round_trips_through_the_reader(tmp_path, walk):
@@ -113,17 +85,17 @@ def test_hand_made_clip_round_trips_through_the_reader(tmp_path, walk):
         tmp_path,
         {"000007": (features.float().numpy(), [WHOLE])},
         {"train": ["000007"]},
-        joints={"000007": positions[:80].float().numpy()},
+        joints={"000007": positions.float().numpy()},
     )
     ds = HumanML3DDataset(root=root, split="train", length_jitter=False)
     assert len(ds) == 1 and ds.clip_ids == ["000007"] and list(ds.frames) == [80]
     read = ds.features(0)
     assert read.dtype == torch.float32 and read.shape == (80, 263)
     recovered = recover_from_ric(read)
-    torch.testing.assert_close(recovered.double(), positions[:80], atol=1e-5, rtol=0)
+    torch.testing.assert_close(recovered.double(), positions, atol=1e-5, rtol=0)
     torch.testing.assert_close(ds.joints(0), recovered, atol=1e-5, rtol=0)
     # The motion turned through more than a right angle and walked about 2 m.
-    assert float(positions[79, 0, 2]) > 2.0
+    assert float(torch.linalg.vector_norm(positions[79, 0, [0, 2]])) > 2.0
 
 
 def test_item_is_the_z_scored_crop_padded_with_zeros(tmp_path, walk):

@@ -6,7 +6,8 @@ Each clip is one of 14 interactions (``ACTIONS``) between an actor and a reactor
 a short delay, posed by forward kinematics of the SMPL 22-joint skeleton with per-person
 proportions, feet on the ground, per-person posture and secondary motion (:mod:`.secondary`) in
 every joint, three paraphrased captions, and an action / actor annotation in
-``interaction_meta.json``. The same seed gives the same bytes.
+``interaction_meta.json``. The same seed gives the same bytes. ``generate_humanml3d(out, clips=N,
+seed=S)`` writes the actor of each clip as a single-person dataset in the HumanML3D layout.
 """
 
 from __future__ import annotations
@@ -33,12 +34,14 @@ __all__ = [
     "ACTIONS",
     "CONTACT_ACTIONS",
     "GENERATOR_VERSION",
+    "HumanML3DSummary",
     "SynthClip",
     "SynthSummary",
     "assign_actions",
     "assign_splits",
     "generate_clip",
     "generate_dataset",
+    "generate_humanml3d",
 ]
 
 GENERATOR_VERSION = META_FORMAT
@@ -204,3 +207,10 @@ def generate_dataset(
         split_sizes=split_sizes,
         action_counts=counts,
     )
+
+
+# Imported last: the HumanML3D writer reuses the split, action and folder helpers above.
+from intermask.data.synthetic.humanml3d import (  # noqa: E402
+    HumanML3DSummary,
+    generate_humanml3d,
+)

@@ -6,7 +6,10 @@ other", "the first person" / "the second person" matching who really acts), ``{a
 adverb matching the sampled speed (empty at normal speed), ``{side}`` the acting hand or leg, and
 ``{their}`` the actor's possessive.
 
-Inter-X stores captions as ``caption#tok/POS tok/POS ...#0.0#0.0`` with lower-case lemmas and
+Single-person captions (``SOLO_TEMPLATES``, for the HumanML3D layout) describe what the actor
+alone does, with ``{A}`` a single-person phrase; the partner is at most "someone".
+
+Inter-X and HumanML3D store captions as ``caption#tok/POS tok/POS ...#0.0#0.0`` with lower-case lemmas and
 universal POS tags (HumanML3D style). The vocabulary of the templates is closed, so a small
 lexicon tags it exactly; a word missing from it is a bug in the templates and raises.
 """
@@ -109,6 +112,82 @@ TEMPLATES: dict[str, tuple[str, ...]] = {
     ),
 }
 
+SOLO_TEMPLATES: dict[str, tuple[str, ...]] = {
+    "handshake": (
+        "{A} {adv}reaches out {their} {side} hand and shakes hands.",
+        "{A} {adv}extends {their} {side} hand for a handshake.",
+        "{A} {adv}holds out {their} {side} hand to shake hands with someone.",
+    ),
+    "hug": (
+        "{A} {adv}steps forward and hugs someone.",
+        "{A} {adv}walks up to someone and wraps both arms around them.",
+        "{A} {adv}approaches and embraces someone with both arms.",
+    ),
+    "push": (
+        "{A} {adv}pushes forward with both hands.",
+        "{A} {adv}shoves someone in the chest with both hands.",
+        "with both hands, {A} {adv}pushes someone away.",
+    ),
+    "punch_dodge": (
+        "{A} {adv}throws a punch with {their} {side} fist.",
+        "{A} {adv}punches forward with {their} {side} hand.",
+        "{A} {adv}swings {their} {side} fist at someone.",
+    ),
+    "wave": (
+        "{A} {adv}waves {their} {side} hand.",
+        "{A} raises {their} {side} hand and {adv}waves.",
+        "{A} {adv}waves hello with {their} {side} hand.",
+    ),
+    "bow": (
+        "{A} {adv}bows forward.",
+        "{A} {adv}bends forward in a bow.",
+        "{A} {adv}bows politely.",
+    ),
+    "walk_meet": (
+        "{A} {adv}walks forward and stops.",
+        "{A} {adv}sets off and walks forward until they stop.",
+        "{A} {adv}walks forward a few steps and stops.",
+    ),
+    "dance": (
+        "{A} {adv}starts to dance.",
+        "{A} {adv}bounces and sways to the beat.",
+        "{A} {adv}begins to dance to the beat.",
+    ),
+    "pass_object": (
+        "{A} {adv}hands an object forward with {their} {side} hand.",
+        "{A} {adv}holds out something in {their} {side} hand.",
+        "{A} {adv}passes an item to someone with {their} {side} hand.",
+    ),
+    "high_five": (
+        "{A} {adv}raises {their} {side} hand for a high five.",
+        "{A} {adv}lifts {their} {side} hand and gives a high five.",
+        "{A} {adv}holds up {their} {side} hand for a high five.",
+    ),
+    "kick_block": (
+        "{A} {adv}kicks with {their} {side} leg.",
+        "{A} {adv}throws a kick with {their} {side} leg.",
+        "{A} {adv}lifts {their} {side} leg to kick.",
+    ),
+    "chase": (
+        "{A} {adv}runs forward.",
+        "{A} {adv}runs after someone.",
+        "{A} {adv}starts chasing someone.",
+    ),
+    "pat_shoulder": (
+        "{A} {adv}pats someone on the shoulder with {their} {side} hand.",
+        "{A} {adv}taps the shoulder of someone with {their} {side} hand.",
+        "{A} {adv}reaches out {their} {side} hand and pats a shoulder.",
+    ),
+    "beckon": (
+        "{A} {adv}beckons with {their} {side} hand.",
+        "{A} {adv}gestures with {their} {side} hand for someone to come.",
+        "{A} {adv}calls someone over with {their} {side} hand.",
+    ),
+}
+SOLO_PHRASES = ("a person", "the person")
+# A time-tagged sub-clip where the person moves across the floor: (minimum speed m/s, caption).
+MOVING_CAPTIONS = ((2.0, "{A} runs forward."), (0.0, "{A} walks forward."))
+
 # (actor, other) phrasings; "first"/"second" must name the person who really acts.
 _NEUTRAL_PAIRS = (
     ("one person", "the other person"),
@@ -160,6 +239,30 @@ def make_captions(
             )
         )
     return tuple(captions)
+
+
+def make_solo_captions(
+    rng: np.random.Generator, *, action: str, side: str, speed: float
+) -> tuple[str, ...]:
+    """The single-person templates of `action`, in a random order, each with a random phrase for
+    the person and an adverb matching `speed`."""
+    templates = SOLO_TEMPLATES[action]
+    adverbs = speed_adverbs(speed)
+    captions = []
+    for index in rng.permutation(len(templates)):
+        phrase = SOLO_PHRASES[int(rng.integers(len(SOLO_PHRASES)))]
+        adverb = adverbs[int(rng.integers(len(adverbs)))] if adverbs else ""
+        captions.append(
+            _fill(templates[int(index)], actor=phrase, other="", adverb=adverb, side=side)
+        )
+    return tuple(captions)
+
+
+def moving_caption(rng: np.random.Generator, speed: float) -> str:
+    """Caption of a sub-clip in which the person moves at `speed` m/s on average."""
+    template = next(text for floor, text in MOVING_CAPTIONS if speed >= floor)
+    phrase = SOLO_PHRASES[int(rng.integers(len(SOLO_PHRASES)))]
+    return _fill(template, actor=phrase, other="", adverb="", side="")
 
 
 # ----------------------------------------------------------------------------- POS tagging
@@ -391,6 +494,7 @@ def tag_caption(caption: str) -> str:
     return " ".join(tokens)
 
 
-def processed_line(caption: str) -> str:
-    """One Inter-X texts_processed line: caption#tagged tokens#0.0#0.0."""
-    return f"{caption}#{tag_caption(caption)}#0.0#0.0"
+def processed_line(caption: str, start: str = "0.0", end: str = "0.0") -> str:
+    """One Inter-X texts_processed / HumanML3D texts line: caption#tagged tokens#start#end (the
+    time tags in seconds, 0.0#0.0 for the whole clip)."""
+    return f"{caption}#{tag_caption(caption)}#{start}#{end}"
