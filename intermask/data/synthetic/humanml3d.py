@@ -30,15 +30,9 @@ import torch
 
 from intermask.data.humanml3d import HumanML3DLayout
 from intermask.data.normalization import StatsAccumulator
-from intermask.data.synthetic import (
-    ACTIONS,
-    _prepare,
-    assign_actions,
-    assign_splits,
-    generate_clip,
-)
 from intermask.data.synthetic.captions import make_solo_captions, moving_caption, processed_line
-from intermask.data.synthetic.clips import SynthClip
+from intermask.data.synthetic.clips import ACTIONS, SynthClip, generate_clip
+from intermask.data.synthetic.planning import assign_actions, assign_splits, prepare_folder
 from intermask.data.synthetic.scene import FPS as SOURCE_FPS
 from intermask.data.synthetic.writers import META_FILE, META_FORMAT, SPLITS
 from intermask.motion import humanml3d as hml
@@ -182,7 +176,7 @@ def generate_humanml3d(
     out = Path(out)
     splits = assign_splits(clips, seed, split_fractions)
     actions = assign_actions(clips, seed)
-    _prepare(out)  # refuses a folder that holds anything but a synthetic dataset
+    prepare_folder(out)  # refuses a folder that holds anything but a synthetic dataset
     layout = HumanML3DLayout(out)
     for name in LAYOUT_ENTRIES:
         path = out / name
