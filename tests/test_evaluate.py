@@ -292,7 +292,9 @@ def test_demo_protocol_setting():
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose("eval", overrides=["experiment=eval_demo", "eval_ckpt=e.ckpt"])
     assert cfg.protocol.eval_batch_size == 32 and cfg.protocol.replications == 5
-    assert cfg.data.max_length == 96 and cfg.sampler.iterations == 10  # gen_demo's crop length
+    assert cfg.data.max_length == 96  # gen_demo's crop length
+    # persons in turn, 5 iterations each: the forward passes of 10 iterations together
+    assert (cfg.sampler.persons, cfg.sampler.iterations) == ("in_turn", 5)
     assert cfg.protocol.mm_replications == 1 and cfg.data.synthesize_if_missing
     assert cfg.penetration.modes == ["reaction"] and cfg.arflow.steps == 5
     assert list(cfg.arflow.step_ablation) == [2, 10]
