@@ -87,6 +87,17 @@ def read_interaction_meta(root: Path) -> dict[str, ClipMeta] | None:
         ) from err
 
 
+def read_npy(path: Path, *, what: str) -> np.ndarray:
+    """The array of a .npy file (no pickles); DataError naming the file when it is missing or
+    unreadable (``what`` names the file's role: "motion", "joints", ...)."""
+    if not path.is_file():
+        raise DataError(f"{path}: {what} file not found")
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as err:
+        raise DataError(f"{path}: cannot read as .npy ({err})") from err
+
+
 def check_motion_array(array: np.ndarray, path: Path, *, trailing: tuple[int, ...]) -> np.ndarray:
     """Shape (T, *trailing), real dtype, finite; returns it as float32."""
     expected = "(T, " + ", ".join(str(d) for d in trailing) + ")"

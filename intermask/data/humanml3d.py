@@ -45,6 +45,7 @@ from intermask.data.common import (
     log_skipped,
     read_caption_lines,
     read_id_list,
+    read_npy,
     split_key,
 )
 from intermask.data.errors import DataError, SkippedClip
@@ -138,13 +139,7 @@ def subclip_tag(rank: int) -> str:
 
 def load_npy(path: Path, *, trailing: tuple[int, ...], what: str) -> np.ndarray:
     """A (T, *trailing) finite float .npy file as float32; DataError naming the file otherwise."""
-    if not path.is_file():
-        raise DataError(f"{path}: {what} file not found")
-    try:
-        array = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as err:
-        raise DataError(f"{path}: cannot read as .npy ({err})") from err
-    return check_motion_array(array, path, trailing=trailing)
+    return check_motion_array(read_npy(path, what=what), path, trailing=trailing)
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ from intermask.data.common import (
     read_caption_lines,
     read_id_list,
     read_interaction_meta,
+    read_npy,
     single_threaded,
 )
 from intermask.data.errors import DataError, SkippedClip
@@ -97,12 +98,7 @@ def read_ignore_list(layout: InterHumanLayout) -> set[str]:
 
 def load_person(path: Path) -> np.ndarray:
     """(T, 492) raw rows -> (T, 192) body columns, float32; DataError on any problem."""
-    if not path.is_file():
-        raise DataError(f"{path}: motion file not found")
-    try:
-        raw = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as err:
-        raise DataError(f"{path}: cannot read as .npy ({err})") from err
+    raw = read_npy(path, what="motion")
     if raw.ndim != 2 or raw.shape[1] != RAW_DIM:
         raise DataError(f"{path}: expected shape (T, {RAW_DIM}), got {tuple(raw.shape)}")
     if not np.issubdtype(raw.dtype, np.floating):

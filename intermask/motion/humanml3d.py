@@ -40,6 +40,15 @@ RIC = slice(4, 4 + (NUM_JOINTS - 1) * 3)  # 4:67
 ROTATIONS = slice(RIC.stop, RIC.stop + (NUM_JOINTS - 1) * 6)  # 67:193
 LOCAL_VELOCITY = slice(ROTATIONS.stop, ROTATIONS.stop + NUM_JOINTS * 3)  # 193:259
 FOOT_CONTACTS = slice(LOCAL_VELOCITY.stop, LOCAL_VELOCITY.stop + 4)  # 259:263
+PARTS = (  # the seven parts in order; they tile the 263 dims
+    ROOT_ROT_VELOCITY,
+    ROOT_LINEAR_VELOCITY,
+    ROOT_HEIGHT,
+    RIC,
+    ROTATIONS,
+    LOCAL_VELOCITY,
+    FOOT_CONTACTS,
+)
 
 # The reference processing (HumanML3D motion_process.py) fixes these:
 FACE_JOINTS = (2, 1, 17, 16)  # right hip, left hip, right shoulder, left shoulder

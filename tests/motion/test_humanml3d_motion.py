@@ -7,15 +7,7 @@ from intermask.motion import humanml3d as hml
 
 
 def test_slices_tile_the_263_dims():
-    slices = (
-        hml.ROOT_ROT_VELOCITY,
-        hml.ROOT_LINEAR_VELOCITY,
-        hml.ROOT_HEIGHT,
-        hml.RIC,
-        hml.ROTATIONS,
-        hml.LOCAL_VELOCITY,
-        hml.FOOT_CONTACTS,
-    )
+    slices = hml.PARTS
     assert [s.stop - s.start for s in slices] == [1, 2, 1, 63, 126, 66, 4]
     assert [s.start for s in slices[1:]] == [s.stop for s in slices[:-1]]
     assert slices[0].start == 0 and slices[-1].stop == hml.FEATURE_DIM == 263

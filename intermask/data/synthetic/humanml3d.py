@@ -52,15 +52,7 @@ MOVING_SPEED = 0.5  # m/s of the root on the floor above which a frame counts as
 MIN_PHASE_FRAMES = 40  # a sub-clip must pass the reader's 40-frame rule
 _CAPTION_TAG = 0xCA7  # third seed word: caption streams apart from the clip streams
 # The parts whose std the reference replaces by the part's mean std (cal_mean_variance.ipynb).
-STD_GROUPS = (
-    hml.ROOT_ROT_VELOCITY,
-    hml.ROOT_LINEAR_VELOCITY,
-    hml.ROOT_HEIGHT,
-    hml.RIC,
-    hml.ROTATIONS,
-    hml.LOCAL_VELOCITY,
-    hml.FOOT_CONTACTS,
-)
+STD_GROUPS = hml.PARTS
 
 
 @dataclass(frozen=True)
