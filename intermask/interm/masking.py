@@ -125,11 +125,26 @@ def random_masking(
     batch = tokens.shape[0]
     if tau is None:
         tau = _rand((batch,), tokens, generator).double()
+    return _scheduled_mask(valid, tau, generator)
+
+
+def _scheduled_mask(
+    eligible: torch.Tensor, tau: torch.Tensor, generator: torch.Generator | None
+) -> torch.Tensor:
+    """(B, ...) bool -> ``ceil(gamma(tau) * n)`` (at least one) of each sample's ``n`` eligible
+    positions, chosen uniformly."""
     count = scheduled_count(
-        cosine_schedule(tau).to(tokens.device), valid.flatten(1).sum(1), minimum=1
+        cosine_schedule(tau).to(eligible.device), eligible.flatten(1).sum(1), minimum=1
     )
-    scores = _rand(tuple(tokens.shape), tokens, generator).masked_fill(~valid, math.inf)
-    return lowest_ranks(scores, count) & valid
+    scores = _rand(tuple(eligible.shape), eligible, generator).masked_fill(~eligible, math.inf)
+    return lowest_ranks(scores, count) & eligible
+
+
+def _one_person(batch: int, like: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
+    """(B, 2, 1, 1) bool, True for one person per sample, chosen uniformly."""
+    person = (_rand((batch,), like, generator) < 0.5).long()  # (B,)
+    chosen = torch.arange(2, device=like.device)[None, :] == person[:, None]  # (B, 2)
+    return chosen[:, :, None, None]
 
 
 def interaction_masking(
@@ -143,9 +158,7 @@ def interaction_masking(
     uniformly per sample, are masked; the other person stays fully visible (section 3.2.1)."""
     tokens = stack_persons(tokens_a, tokens_b)
     valid = valid_tokens(tokens, lengths_in_steps)
-    person = (_rand((tokens.shape[0],), tokens, generator) < 0.5).long()  # (B,)
-    chosen = torch.arange(2, device=tokens.device)[None, :] == person[:, None]  # (B, 2)
-    return valid & chosen[:, :, None, None]
+    return valid & _one_person(tokens.shape[0], tokens, generator)
 
 
 def solo_masking(
@@ -161,14 +174,8 @@ def solo_masking(
     valid tokens ``ceil(gamma(tau) * n)``, at least one, chosen uniformly."""
     tokens = stack_persons(tokens_a, tokens_b)
     valid = valid_tokens(tokens, lengths_in_steps)
-    absent = (_rand((tokens.shape[0],), tokens, generator) < 0.5).long()  # (B,)
-    hidden = (torch.arange(2, device=tokens.device)[None, :] == absent[:, None])[:, :, None, None]
-    present = valid & ~hidden
-    count = scheduled_count(
-        cosine_schedule(tau).to(tokens.device), present.flatten(1).sum(1), minimum=1
-    )
-    scores = _rand(tuple(tokens.shape), tokens, generator).masked_fill(~present, math.inf)
-    return (lowest_ranks(scores, count) & present) | (valid & hidden)
+    hidden = _one_person(tokens.shape[0], tokens, generator)
+    return _scheduled_mask(valid & ~hidden, tau, generator) | (valid & hidden)
 
 
 def training_mask(
