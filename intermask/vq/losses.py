@@ -15,10 +15,14 @@ import torch.nn.functional as F
 
 from intermask.motion.kinematics import bone_lengths
 from intermask.motion.rotations import geodesic_angle, rot6d_to_matrix
-from intermask.motion.skeleton import FOOT_JOINTS
+from intermask.motion.skeleton import FOOT_JOINTS, JOINT_NAMES
 from intermask.vq.views import Geometry
 
 LossKind = Literal["smooth_l1", "l1", "l2"]
+# the joints an ``arms`` loss weighs: the ones a contact (handshake, push, pass) is made with
+ARM_JOINTS: tuple[int, ...] = tuple(
+    JOINT_NAMES.index(name) for name in ("l_elbow", "r_elbow", "l_wrist", "r_wrist")
+)
 
 
 @dataclass(frozen=True)
@@ -33,6 +37,9 @@ class LossWeights:
     geodesic: float = 0.01
     foot_contact: float = 500.0
     commitment: float = 0.02
+    # not in the paper (0 = off): the elbows' and wrists' positions relative to the pelvis, so
+    # an arm reaching for the partner costs more than its share of the 22-joint position term
+    arms: float = 0.0
 
 
 class LossTerms(NamedTuple):
@@ -44,6 +51,7 @@ class LossTerms(NamedTuple):
     geodesic: torch.Tensor
     foot_contact: torch.Tensor
     commitment: torch.Tensor
+    arms: torch.Tensor
 
 
 def elementwise_loss(
@@ -97,13 +105,24 @@ def vq_losses(
                 rot6d_to_matrix(predicted_geometry.rot6d), rot6d_to_matrix(target_geometry.rot6d)
             )
             geodesic = _masked_mean(angles, frame_mask)  # mean rotation error in radians
-    positions = velocity = bones = foot_contact = zero
+    positions = velocity = bones = foot_contact = arms = zero
     if predicted_geometry.positions is not None and target_geometry.positions is not None:
         predicted, real = predicted_geometry.positions, target_geometry.positions
         positions = _masked_mean(elementwise_loss(predicted, real, kind), frame_mask)
         step_mask = frame_mask[:, 1:] & frame_mask[:, :-1]
         predicted_step, real_step = predicted[:, 1:] - predicted[:, :-1], real[:, 1:] - real[:, :-1]
         velocity = _masked_mean(elementwise_loss(predicted_step, real_step, kind), step_mask)
+        if weights.arms or measure_unweighted:
+            with torch.set_grad_enabled(torch.is_grad_enabled() and bool(weights.arms)):
+                arm = list(ARM_JOINTS)
+                arms = _masked_mean(
+                    elementwise_loss(
+                        predicted[:, :, arm] - predicted[:, :, :1],
+                        real[:, :, arm] - real[:, :, :1],
+                        kind,
+                    ),
+                    frame_mask,
+                )
         bones = _masked_mean(
             elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
         )
@@ -122,7 +141,8 @@ def vq_losses(
         + weights.geodesic * geodesic
         + weights.foot_contact * foot_contact
         + weights.commitment * commit_loss
+        + weights.arms * arms
     )
     return LossTerms(
-        total, reconstruction, positions, velocity, bones, geodesic, foot_contact, commit_loss
+        total, reconstruction, positions, velocity, bones, geodesic, foot_contact, commit_loss, arms
     )

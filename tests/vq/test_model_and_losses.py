@@ -147,6 +147,23 @@ def test_a_geodesic_term_of_weight_zero_is_measured_without_a_graph_or_skipped()
     assert skipped.total.item() == pytest.approx(measured.total.item())
 
 
+def test_arms_term_measures_elbows_and_wrists_relative_to_the_pelvis():
+    view, target = _geometry_pair()
+    prediction = target.clone()
+    positions = prediction[..., ih.POSITIONS].reshape(2, 8, 22, 3)
+    positions[..., :, 0] += 0.5  # the whole body moved: nothing changes relative to the pelvis
+    positions[..., 21, 1] += 0.02  # the right wrist 2 cm higher
+    prediction[..., ih.POSITIONS] = positions.flatten(-2)
+    off = _losses(view, prediction, target, kind="l1")
+    # one joint of the four arm joints, one axis of three
+    assert off.arms.item() == pytest.approx(0.02 / 12, rel=1e-4)
+    weighted = _losses(view, prediction, target, kind="l1", weights=LossWeights(arms=10.0))
+    assert weighted.total.item() == pytest.approx(
+        off.total.item() + 10.0 * off.arms.item(), rel=1e-5
+    )
+    assert _losses(view, target, target).arms.item() == 0.0
+
+
 def test_foot_contact_penalises_sliding_planted_feet_only():
     view, target = _geometry_pair()
     target[..., ih.POSITIONS] = 0.0
