@@ -42,6 +42,38 @@ def test_data_config_instantiates_the_datamodule(tmp_path):
     assert datamodule.mode == "window" and datamodule.max_length == 300 and datamodule.seed == 3407
 
 
+@pytest.mark.parametrize("data", ["humanml3d", "synthetic_humanml3d"])
+def test_momask_rvq_composes_with_momask_values(data, tmp_path):
+    import torch
+
+    from intermask.data.text_motion import TextMotionDataModule
+    from intermask.vq.views import HumanML3DView
+
+    cfg = _compose(
+        "train_vq",
+        [
+            f"data={data}",
+            "experiment=momask_rvq",
+            f"paths.data_dir={tmp_path}",
+            "paths.output_dir=/tmp/unused",
+        ],
+    )
+    assert cfg.data.mode == "window" and cfg.data.window == 64 and cfg.data.stride == 1
+    assert cfg.data.batch_size == 256 and cfg.trainer.max_epochs == 50
+    quantizer = cfg.model.net.quantizer
+    assert (quantizer.num_quantizers, quantizer.codebook_size, quantizer.dim) == (6, 512, 512)
+    assert quantizer.dropout_prob == 0.2 and cfg.model.loss_weights.commitment == 0.02
+    assert list(cfg.model.net.encoder.dilations) == [9, 3, 1]
+    datamodule = instantiate(cfg.data)
+    assert isinstance(datamodule, TextMotionDataModule) and datamodule.mode == "window"
+    folder = {"humanml3d": "HumanML3D", "synthetic_humanml3d": "synthetic/humanml3d"}[data]
+    assert datamodule.root == tmp_path / folder
+    model = instantiate(cfg.model)
+    assert isinstance(model.net.view, HumanML3DView)
+    indices = model.net.encode(torch.randn(1, 64, 263))
+    assert indices.shape == (1, 6, 1, 16)  # 6 layers, one row, one token per 4 frames
+
+
 def test_unknown_keys_are_rejected():
     from hydra.errors import ConfigCompositionException
 

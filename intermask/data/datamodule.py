@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Literal
 
 from lightning import LightningDataModule
-from torch.utils.data import DataLoader
+from torch.utils.data import DataLoader, Dataset
 
 from intermask.data.common import EpochSampler
 from intermask.data.errors import DataError
@@ -28,9 +28,141 @@ from intermask.motion.kinds import DatasetKind
 log = logging.getLogger(__name__)
 
 Split = Literal["train", "val", "test"]
+STAGE_SPLITS: dict[str, tuple[Split, ...]] = {
+    "fit": ("train", "val"),
+    "validate": ("val",),
+    "test": ("test",),
+    "predict": ("test",),
+}
 
 
-class InteractionDataModule(LightningDataModule):
+class EpochDataModule(LightningDataModule):
+    """Reproducible train/val/test loaders over ``self.datasets`` (split -> dataset whose items
+    take ``(index, epoch)`` keys): every pass is drawn by an :class:`EpochSampler` seeded by
+    ``(seed, epoch)``, and data-parallel ranks read their blocks of every global batch.
+
+    Subclasses set ``batch_size``, ``eval_batch_size``, ``num_workers``, ``pin_memory``,
+    ``persistent_workers``, ``drop_last``, ``seed``, ``eval_shuffle`` and ``datasets``, and
+    build a split's dataset in ``setup``.
+    """
+
+    batch_size: int
+    eval_batch_size: int
+    num_workers: int
+    pin_memory: bool
+    persistent_workers: bool
+    drop_last: bool
+    seed: int
+    eval_shuffle: bool
+    datasets: dict[str, Dataset]
+    normalizer: Normalizer | None
+
+    def load_normalizer(self) -> Normalizer | None:
+        raise NotImplementedError
+
+    def build_dataset(self, split: Split) -> Dataset:
+        raise NotImplementedError
+
+    def setup(self, stage: str | None = None) -> None:
+        """Load the statistics once, then build the splits ``stage`` needs (all for None)."""
+        if self.normalizer is None:
+            self.normalizer = self.load_normalizer()
+        for split in STAGE_SPLITS.get(stage or "", ("train", "val", "test")):
+            if split not in self.datasets:
+                self.datasets[split] = self.build_dataset(split)
+
+    # ------------------------------------------------------------------ loaders
+
+    def _processes(self) -> tuple[int, int]:
+        """(rank, world size) of the attached trainer; (0, 1) outside one."""
+        trainer = getattr(self, "trainer", None)
+        if trainer is None:
+            return 0, 1
+        rank, world = int(trainer.global_rank), int(trainer.world_size)
+        if world > 1 and getattr(trainer._accelerator_connector, "use_distributed_sampler", False):
+            raise ValueError(
+                "trainer.use_distributed_sampler must be false: the datamodule gives each process "
+                "its block of every global batch itself (a second sampler would drop data)"
+            )
+        return rank, world
+
+    def _loader(
+        self,
+        split: Split,
+        *,
+        batch_size: int,
+        shuffle: bool,
+        drop_last: bool,
+        epoch: int = 0,
+        sharded: bool = True,
+    ) -> DataLoader:
+        """``sharded``: under a data-parallel trainer, each rank reads its block of every global
+        batch (``EpochSampler``); the trainer must not add its own distributed sampler."""
+        if split not in self.datasets:
+            self.setup({"train": "fit", "val": "validate", "test": "test"}[split])
+        dataset = self.datasets[split]
+        rank, world = self._processes() if sharded else (0, 1)
+        sampler = EpochSampler(
+            len(dataset),
+            shuffle=shuffle,
+            seed=self.seed,
+            epoch=epoch,
+            batch_size=batch_size,
+            rank=rank,
+            world_size=world,
+            drop_last=drop_last,
+        )
+        return DataLoader(
+            dataset,
+            batch_size=batch_size,
+            sampler=sampler,
+            num_workers=self.num_workers,
+            pin_memory=self.pin_memory,
+            persistent_workers=self.persistent_workers,
+            drop_last=drop_last,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader(
+            "train", batch_size=self.batch_size, shuffle=True, drop_last=self.drop_last
+        )
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader(
+            "val", batch_size=self.eval_batch_size, shuffle=self.eval_shuffle, drop_last=False
+        )
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader(
+            "test", batch_size=self.eval_batch_size, shuffle=self.eval_shuffle, drop_last=False
+        )
+
+    def eval_dataloader(
+        self,
+        split: Split = "test",
+        *,
+        batch_size: int | None = None,
+        shuffle: bool = True,
+        drop_last: bool = True,
+        epoch: int = 0,
+    ) -> DataLoader:
+        """A reproducible evaluation pass: pass ``epoch`` re-draws crops, captions, order and
+        person swaps; the same ``(seed, epoch)`` gives the same batches in every run.
+
+        Defaults follow the protocol (shuffled eval batches, drop_last); the GT-vs-GT FID needs two
+        passes with different epochs.
+        """
+        return self._loader(
+            split,
+            batch_size=batch_size or self.eval_batch_size,
+            shuffle=shuffle,
+            drop_last=drop_last,
+            epoch=epoch,
+            sharded=False,  # protocol passes run whole on one process (rank 0 during training)
+        )
+
+
+class InteractionDataModule(EpochDataModule):
     """Train/val/test loaders for one dataset folder.
 
     dataset: the dataset kind (the features every model and metric downstream expects).
@@ -169,19 +301,6 @@ class InteractionDataModule(LightningDataModule):
             self._compute_stats()
         return Normalizer.load(self.stats_dir, feature_shape=self.feature_shape)
 
-    def setup(self, stage: str | None = None) -> None:
-        if self.normalizer is None:
-            self.normalizer = self.load_normalizer()
-        splits: tuple[Split, ...] = {
-            "fit": ("train", "val"),
-            "validate": ("val",),
-            "test": ("test",),
-            "predict": ("test",),
-        }.get(stage or "", ("train", "val", "test"))
-        for split in splits:
-            if split not in self.datasets:
-                self.datasets[split] = self.build_dataset(split)
-
     def build_dataset(self, split: Split, *, mode: Mode | None = None) -> ClipReader:
         """The dataset of ``split`` with this module's settings (mirroring in train only)."""
         common = dict(
@@ -200,93 +319,3 @@ class InteractionDataModule(LightningDataModule):
         if self.reader.supports_mirror:
             common["mirror"] = self.mirror and split == "train"
         return self.reader(**common)
-
-    # ------------------------------------------------------------------ loaders
-
-    def _processes(self) -> tuple[int, int]:
-        """(rank, world size) of the attached trainer; (0, 1) outside one."""
-        trainer = getattr(self, "trainer", None)
-        if trainer is None:
-            return 0, 1
-        rank, world = int(trainer.global_rank), int(trainer.world_size)
-        if world > 1 and getattr(trainer._accelerator_connector, "use_distributed_sampler", False):
-            raise ValueError(
-                "trainer.use_distributed_sampler must be false: the datamodule gives each process "
-                "its block of every global batch itself (a second sampler would drop data)"
-            )
-        return rank, world
-
-    def _loader(
-        self,
-        split: Split,
-        *,
-        batch_size: int,
-        shuffle: bool,
-        drop_last: bool,
-        epoch: int = 0,
-        sharded: bool = True,
-    ) -> DataLoader:
-        """``sharded``: under a data-parallel trainer, each rank reads its block of every global
-        batch (``EpochSampler``); the trainer must not add its own distributed sampler."""
-        if split not in self.datasets:
-            self.setup({"train": "fit", "val": "validate", "test": "test"}[split])
-        dataset = self.datasets[split]
-        rank, world = self._processes() if sharded else (0, 1)
-        sampler = EpochSampler(
-            len(dataset),
-            shuffle=shuffle,
-            seed=self.seed,
-            epoch=epoch,
-            batch_size=batch_size,
-            rank=rank,
-            world_size=world,
-            drop_last=drop_last,
-        )
-        return DataLoader(
-            dataset,
-            batch_size=batch_size,
-            sampler=sampler,
-            num_workers=self.num_workers,
-            pin_memory=self.pin_memory,
-            persistent_workers=self.persistent_workers,
-            drop_last=drop_last,
-        )
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader(
-            "train", batch_size=self.batch_size, shuffle=True, drop_last=self.drop_last
-        )
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader(
-            "val", batch_size=self.eval_batch_size, shuffle=self.eval_shuffle, drop_last=False
-        )
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader(
-            "test", batch_size=self.eval_batch_size, shuffle=self.eval_shuffle, drop_last=False
-        )
-
-    def eval_dataloader(
-        self,
-        split: Split = "test",
-        *,
-        batch_size: int | None = None,
-        shuffle: bool = True,
-        drop_last: bool = True,
-        epoch: int = 0,
-    ) -> DataLoader:
-        """A reproducible evaluation pass: pass ``epoch`` re-draws crops, captions, order and
-        person swaps; the same ``(seed, epoch)`` gives the same batches in every run.
-
-        Defaults follow the protocol (shuffled eval batches, drop_last); the GT-vs-GT FID needs two
-        passes with different epochs.
-        """
-        return self._loader(
-            split,
-            batch_size=batch_size or self.eval_batch_size,
-            shuffle=shuffle,
-            drop_last=drop_last,
-            epoch=epoch,
-            sharded=False,  # protocol passes run whole on one process (rank 0 during training)
-        )

@@ -333,3 +333,93 @@ class HumanML3DDataset(Dataset):
             "clip_id": self.clip_ids[span.clip],
             "start": span.start + start,
         }
+
+
+class HumanML3DWindows(Dataset):
+    """One split of HumanML3D as fixed-length motion windows, the tokenizer's training data.
+
+    As the reference's ``MotionDataset`` (MoMask's RVQ): every clip of the split with at least
+    ``window + 1`` frames contributes ``T - window`` windows, those starting at frames
+    ``0, stride, 2 stride, ...`` below ``T - window`` (the reference: ``stride`` 1, so a window
+    never ends at the last frame); captions are not read and the [40, 200) length rule does not
+    apply. Shorter clips are listed in :attr:`skipped`. Items: {"motion": (window, 263)
+    z-scored, "length": window, "id": the clip's id, "start": first frame}. The windows are
+    fixed: ``epoch`` only changes the sampler's order.
+    """
+
+    fps = FPS
+    feature_dim = FEATURE_DIM
+
+    def __init__(
+        self,
+        *,
+        root: str | Path,
+        split: str,
+        window: int = 64,  # MoMask's window_size
+        stride: int = 1,
+        normalizer: Normalizer | None = None,
+        normalize: bool = True,
+    ):
+        if window < 1 or stride < 1:
+            raise ValueError(f"window and stride must be >= 1, got {window} and {stride}")
+        self.layout = HumanML3DLayout(Path(root))
+        self.split, self.window, self.stride = split, window, stride
+        if not self.layout.root.is_dir():
+            raise DataError(
+                f"{self.layout.root}: dataset root not found (expected the HumanML3D folder)"
+            )
+        if normalizer is None and normalize:
+            normalizer = Normalizer.from_files(
+                self.layout.mean_file, self.layout.std_file, feature_shape=(FEATURE_DIM,)
+            )
+        self.normalizer = normalizer if normalize else None
+        split_file = self.layout.split_file(split)
+        self.skipped: list[SkippedClip] = []
+        self.clip_ids: list[str] = []
+        motions: list[np.ndarray] = []
+        starts: list[np.ndarray] = []
+        for clip_id in read_id_list(split_file, what=f"{split} split"):
+            motion = load_npy(
+                self.layout.motion_file(clip_id),
+                trailing=(FEATURE_DIM,),
+                what=f"motion (listed in {split_file.name})",
+            )
+            if len(motion) <= window:
+                reason = f"{len(motion)} frames, no {window}-frame window (needs {window + 1})"
+                self.skipped.append(SkippedClip(clip_id, reason))
+                continue
+            offset = sum(len(m) for m in motions)
+            starts.append(offset + np.arange(0, len(motion) - window, stride))
+            self.clip_ids.append(clip_id)
+            motions.append(motion)
+        log_skipped(self.skipped, where=f"{split_file} (windows)")
+        if not motions:
+            raise DataError(
+                f"{split_file}: no clip has a {window}-frame window "
+                f"({len(self.skipped)} clips, all of {window} frames or fewer)"
+            )
+        self._raw = np.concatenate(motions, axis=0)
+        self._starts = np.concatenate(starts)
+        self._clips = np.concatenate(
+            [np.full(len(s), clip, dtype=np.int64) for clip, s in enumerate(starts)]
+        )
+        self._clip_offsets = np.concatenate(([0], np.cumsum([len(m) for m in motions])))
+
+    def __len__(self) -> int:
+        return len(self._starts)
+
+    def __getitem__(self, key: ItemKey) -> dict[str, Any]:
+        index, _ = split_key(key, 0)
+        if not 0 <= index < len(self):
+            raise IndexError(f"index {index} out of range for {len(self)} windows")
+        start = int(self._starts[index])
+        features = torch.from_numpy(self._raw[start : start + self.window])
+        if self.normalizer is not None:
+            features = self.normalizer.normalize(features)
+        clip = int(self._clips[index])
+        return {
+            "motion": features,
+            "length": self.window,
+            "id": self.clip_ids[clip],
+            "start": start - int(self._clip_offsets[clip]),
+        }

@@ -14,7 +14,7 @@ from intermask.metrics.mpjpe import MPJPE
 from intermask.utils.lightning import ScheduledModule, writes_step_logs
 from intermask.vq.losses import LossKind, LossTerms, LossWeights, vq_losses
 from intermask.vq.model import MotionVQVAE, VQVAEOutput
-from intermask.vq.views import InterHumanView, TwoPersonView, person_view
+from intermask.vq.views import NormalizedView, TwoPersonView, person_view
 
 log = logging.getLogger(__name__)
 
@@ -74,13 +74,14 @@ class VQVAEModule(ScheduledModule):
     def setup(self, stage: str) -> None:
         """Copy the datamodule's normalization statistics into the view (then they live in checkpoints)."""
         view = person_view(self.net.view)
-        if isinstance(view, InterHumanView) and not bool(view.has_statistics):
+        if isinstance(view, NormalizedView) and not bool(view.has_statistics):
             normalizer = (
                 getattr(self.trainer.datamodule, "normalizer", None) if self.trainer else None
             )
             if normalizer is None:
                 raise RuntimeError(
-                    "the InterHuman VQ needs normalization statistics: the datamodule exposes none"
+                    f"the {type(view).__name__} tokenizer needs normalization statistics: the "
+                    "datamodule exposes none"
                 )
             view.set_statistics(normalizer.mean, normalizer.std)
 

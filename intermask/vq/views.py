@@ -14,6 +14,7 @@ import torch
 from einops import rearrange
 from torch import nn
 
+from intermask.motion import humanml3d as hml
 from intermask.motion import interhuman as ih
 from intermask.motion import interx as ix
 from intermask.motion.skeleton import NUM_JOINTS
@@ -38,7 +39,41 @@ class Geometry(NamedTuple):
     contacts: torch.Tensor | None  # (B, T, 4) in {0, 1} (l_ankle, l_foot, r_ankle, r_foot) or None
 
 
-class InterHumanView(nn.Module):
+class NormalizedView(nn.Module):
+    """A view of z-scored features whose statistics are buffers (``mean``, ``std``, and
+    ``has_statistics``), so checkpoints carry them. Subclasses set ``feature_shape``."""
+
+    feature_shape: tuple[int, ...]
+
+    def __init__(self, *, mean: torch.Tensor | None = None, std: torch.Tensor | None = None):
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(self.feature_shape))
+        self.register_buffer("std", torch.ones(self.feature_shape))
+        self.register_buffer("has_statistics", torch.tensor(False))
+        if (mean is None) != (std is None):
+            raise ValueError("give both mean and std, or neither")
+        if mean is not None:
+            self.set_statistics(mean, std)
+
+    def set_statistics(self, mean: torch.Tensor, std: torch.Tensor) -> None:
+        mean, std = (
+            torch.as_tensor(mean, dtype=torch.float32),
+            torch.as_tensor(std, dtype=torch.float32),
+        )
+        if mean.shape != self.feature_shape or std.shape != self.feature_shape:
+            raise ValueError(
+                f"{type(self).__name__} statistics must have shape {self.feature_shape}, got "
+                f"{tuple(mean.shape)} and {tuple(std.shape)}"
+            )
+        self.mean.copy_(mean)
+        self.std.copy_(std)
+        self.has_statistics.fill_(True)
+
+    def denormalize(self, features: torch.Tensor) -> torch.Tensor:
+        return features * self.std + self.mean
+
+
+class InterHumanView(NormalizedView):
     """Normalized (B, T, 262) features <-> (B, T, 22, 12) [pos, vel, rot6d] per joint.
 
     ``relative_positions`` (off in the paper's configuration): the horizontal (x, z) position of
@@ -65,28 +100,8 @@ class InterHumanView(nn.Module):
     ) -> None:
         """Statistics may come later (``set_statistics``, called with the datamodule's); a
         checkpoint restores them with the weights."""
-        super().__init__()
+        super().__init__(mean=mean, std=std)
         self.relative_positions = relative_positions
-        self.register_buffer("mean", torch.zeros(self.feature_shape))
-        self.register_buffer("std", torch.ones(self.feature_shape))
-        self.register_buffer("has_statistics", torch.tensor(False))
-        if (mean is None) != (std is None):
-            raise ValueError("give both mean and std, or neither")
-        if mean is not None:
-            self.set_statistics(mean, std)
-
-    def set_statistics(self, mean: torch.Tensor, std: torch.Tensor) -> None:
-        mean, std = (
-            torch.as_tensor(mean, dtype=torch.float32),
-            torch.as_tensor(std, dtype=torch.float32),
-        )
-        if mean.shape != self.feature_shape or std.shape != self.feature_shape:
-            raise ValueError(
-                f"InterHuman statistics must have shape (262,), got {tuple(mean.shape)} and {tuple(std.shape)}"
-            )
-        self.mean.copy_(mean)
-        self.std.copy_(std)
-        self.has_statistics.fill_(True)
 
     def to_joints(self, features: torch.Tensor) -> torch.Tensor:
         """(B, T, 262) normalized -> (B, T, 22, 12); the root's absent rotation is 0."""
@@ -118,9 +133,6 @@ class InterHumanView(nn.Module):
         mask = torch.ones(ih.FEATURE_DIM, dtype=torch.bool, device=device)
         mask[ih.CONTACTS] = False
         return mask
-
-    def denormalize(self, features: torch.Tensor) -> torch.Tensor:
-        return features * self.std + self.mean
 
     @property
     def has_positions(self) -> bool:
@@ -183,6 +195,41 @@ class InterXView(nn.Module):
             (contacts, contacts[..., -1:, :]), dim=-2
         )  # repeat the last frame's label
         return Geometry(positions, rot6d, contacts)
+
+
+class HumanML3DView(NormalizedView):
+    """Normalized (B, T, 263) HumanML3D features <-> (B, T, 1, 263): the whole frame is one
+    row of channels, MoMask's 1D temporal tokenizer (``layout: 1d`` with one "joint").
+
+    Geometry: positions rebuilt from the features (:func:`~intermask.motion.humanml3d.
+    recover_from_ric`, the root integrated over the window), the 21 local 6D rotations, and the
+    four foot-contact labels.
+    """
+
+    num_joints = 1
+    channels = hml.FEATURE_DIM
+    feature_shape = (hml.FEATURE_DIM,)
+
+    def to_joints(self, features: torch.Tensor) -> torch.Tensor:
+        return features[..., None, :]
+
+    def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
+        return joints[..., 0, :]
+
+    def reconstruction_mask(self, device: torch.device) -> torch.Tensor:
+        """(263,) all True: MoMask reconstructs every dimension, foot contacts included."""
+        return torch.ones(hml.FEATURE_DIM, dtype=torch.bool, device=device)
+
+    @property
+    def has_positions(self) -> bool:
+        return True
+
+    def geometry(self, features: torch.Tensor) -> Geometry:
+        """(B, T, 263) normalized -> de-normalized Geometry."""
+        raw = self.denormalize(features)
+        rot6d = raw[..., hml.ROTATIONS].unflatten(-1, (NUM_JOINTS - 1, 6))
+        contacts = (raw[..., hml.FOOT_CONTACTS] > 0.5).to(features.dtype)
+        return Geometry(hml.recover_from_ric(raw), rot6d, contacts)
 
 
 class TwoPersonView(nn.Module):

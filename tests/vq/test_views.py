@@ -1,9 +1,12 @@
 """The InterHuman view's root-relative switch: what the image holds, and that it inverts exactly."""
 
+import pytest
 import torch
 
+from intermask.motion import humanml3d as hml
 from intermask.motion import interhuman as ih
-from intermask.vq.views import InterHumanView
+from intermask.vq.views import HumanML3DView, InterHumanView
+from tests.data.test_humanml3d import turning_walk
 
 
 def _view(relative: bool) -> InterHumanView:
@@ -45,3 +48,25 @@ def test_relative_positions_invert_exactly_and_a_root_shift_moves_the_whole_body
     # every joint's x moved with the root; heights and z did not move
     torch.testing.assert_close(after[..., 0] - before[..., 0], torch.full_like(before[..., 0], 0.5))
     torch.testing.assert_close(after[..., 1:], before[..., 1:])
+
+
+def test_humanml3d_view_is_one_row_of_263_channels_and_its_geometry_is_the_recovered_motion():
+    motion = hml.features_from_positions(turning_walk(41))
+    raw = motion.features.float()[None]  # (1, 40, 263)
+    mean, std = raw[0].mean(0), raw[0].std(0) + 0.5
+    view = HumanML3DView(mean=mean, std=std)
+    normalized = (raw - mean) / std
+    image = view.to_joints(normalized)
+    assert image.shape == (1, 40, 1, 263)
+    torch.testing.assert_close(view.from_joints(image), normalized)
+    geometry = view.geometry(normalized)
+    torch.testing.assert_close(geometry.positions[0], motion.joints.float(), atol=1e-5, rtol=0)
+    torch.testing.assert_close(
+        geometry.rot6d[0].flatten(-2), raw[0, :, hml.ROTATIONS], atol=1e-5, rtol=0
+    )
+    torch.testing.assert_close(geometry.contacts[0], raw[0, :, hml.FOOT_CONTACTS])
+    assert bool(view.reconstruction_mask(torch.device("cpu")).all())
+    with pytest.raises(
+        ValueError, match=r"HumanML3DView statistics must have shape \(263,\), got \(262,\)"
+    ):
+        HumanML3DView(mean=torch.zeros(262), std=torch.ones(262))
