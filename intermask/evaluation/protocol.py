@@ -6,7 +6,8 @@ printed in the results header; each config file in configs/protocol/ cites its s
 One replication ``r``:
 
 1. a *reference pass* over the split (loader epoch ``2r``): GT motion embeddings, the real
-   set of every row's FID;
+   set of every row's FID (with ``fid_reference="same_pass"``, as in T2M and MoMask, there is
+   no such pass: the real set is the GT of the evaluation pass's own items);
 2. an *evaluation pass* (epoch ``2r + 1``, independently re-drawn crops, captions and person
    order): per eval batch, text embeddings once, then every row's motion (GT or generated for
    the batch's captions and lengths) -> R-precision and MM Dist within the batch, FID (fake
@@ -37,6 +38,7 @@ from intermask.metrics.retrieval import MMDist, RPrecision
 from intermask.metrics.success import InteractionSuccess
 
 Batch = dict[str, Any]
+FID_REFERENCES = ("separate_pass", "same_pass")
 
 
 @dataclass(frozen=True)
@@ -56,8 +58,15 @@ class ProtocolConstants:
     mm_pairs: int = 10
     top_k: int = 3
     seed: int = 3407
+    # FID's real set: the GT of a second, independently drawn pass ("separate_pass", InterGen
+    # and InterMask) or the GT of the evaluated items themselves ("same_pass", T2M and MoMask)
+    fid_reference: str = "separate_pass"
 
     def __post_init__(self) -> None:
+        if self.fid_reference not in FID_REFERENCES:
+            raise ValueError(
+                f"protocol fid_reference must be one of {FID_REFERENCES}, got {self.fid_reference!r}"
+            )
         for name in ("eval_batch_size", "replications", "diversity_pairs", "top_k"):
             if getattr(self, name) < 1:
                 raise ValueError(f"protocol {name} must be >= 1, got {getattr(self, name)}")
@@ -245,7 +254,8 @@ class ProtocolRunner:
     def replication(self, replication: int) -> dict[str, dict[str, float]]:
         """Metrics of every row for one replication."""
         c = self.constants
-        reference = self._reference_embeddings(replication)
+        same_pass = c.fid_reference == "same_pass"
+        reference = [] if same_pass else self._reference_embeddings(replication)
         metrics = {
             source.name: {
                 "r_precision": RPrecision(top_k=c.top_k),
@@ -275,6 +285,10 @@ class ProtocolRunner:
             count = text.shape[0]
             seeds = sample_seeds(c, replication, 0, count, offset)
             offset += count
+            if same_pass:
+                real = self._motion_embeddings(self.ground_truth, batch, seeds)
+                for row in metrics.values():
+                    row["fid"].update(real, real=True)
             for source in self.sources:
                 output, lengths = source(batch, seeds)
                 motion = self.evaluator.encode_motion(output, lengths)

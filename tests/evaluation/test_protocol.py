@@ -129,6 +129,25 @@ def test_ground_truth_row_is_exact_and_noise_is_at_chance():
     assert len(noise["top1"].values) == 3
 
 
+def test_same_pass_fid_compares_each_row_with_the_gt_of_its_own_items():
+    # 10-item batches of 48 items: each pass holds 40, a different 40 per epoch
+    separate = _runner([Truth(), Noise()], eval_batch_size=10, replications=2)
+    same = _runner(
+        [Truth(), Noise()], eval_batch_size=10, replications=2, fid_reference="same_pass"
+    )
+    epochs = []
+    loader = same.loader
+    same.loader = lambda epoch: (epochs.append(epoch), loader(epoch))[1]
+    apart, together = separate.run({}), same.run({})
+    assert min(apart.rows["Ground Truth"]["fid"].values) > 1e-3  # two different 40-item sets
+    assert together.rows["Ground Truth"]["fid"].values == pytest.approx([0.0, 0.0], abs=1e-4)
+    assert [e for e in epochs if e < 10_000] == [1, 3]  # no reference pass (epochs 0, 2)
+    assert together.rows["Noise"]["fid"].mean > 1.0
+    assert together.rows["Noise"]["top1"].values == apart.rows["Noise"]["top1"].values
+    with pytest.raises(ValueError, match="fid_reference must be one of .*got 'other_pass'"):
+        ProtocolConstants(fid_reference="other_pass")
+
+
 def test_rows_are_reproducible_and_replications_differ():
     first = _runner([Truth(), Noise()]).run({})
     second = _runner([Truth(), Noise()]).run({})
