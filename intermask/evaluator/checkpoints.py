@@ -4,8 +4,11 @@ Released files:
 
 * InterHuman ``interclip.ckpt`` (InterGen): a Lightning checkpoint whose ``state_dict`` keys carry
   a ``model.`` prefix in front of the InterCLIP module names.
-* Inter-X ``finest.tar`` (T2M layout): a dict with the state dicts ``movement_encoder``,
-  ``text_encoder`` and ``motion_encoder`` (plus optimizer state and ``epoch``).
+* T2M's ``finest.tar`` (InterMask's Inter-X matcher, T2M's HumanML3D matcher): a dict with the
+  state dicts ``movement_encoder``, ``text_encoder`` and ``motion_encoder`` (plus optimizer
+  state and ``epoch``). T2M's HumanML3D release keeps the statistics its matcher z-scores motion
+  with in another run folder of the same tree: ``t2m/text_mot_match/model/finest.tar`` and
+  ``t2m/Comp_v6_KLD01/meta/{mean,std}.npy`` (263 values each).
 
 Both are mapped onto our module names (:func:`released_interclip_state`,
 :func:`released_t2m_state`); :func:`load_state` then reports every missing, unexpected and
@@ -24,6 +27,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from intermask.data.normalization import Normalizer
 from intermask.utils.checkpoint_files import read_checkpoint_file
 from intermask.utils.files import file_hash as file_hash  # re-exported
 
@@ -31,6 +35,9 @@ log = logging.getLogger(__name__)
 
 INTERCLIP_PREFIX = "model."
 T2M_PARTS = ("movement_encoder", "text_encoder", "motion_encoder")
+T2M_FIRST_CONV = "main.0.weight"  # movement encoder's first Conv1d: (hidden, input channels, 4)
+T2M_META_FILES = ("mean.npy", "std.npy")
+T2M_META_RUN = "Comp_v6_KLD01"  # the T2M run whose meta/ the evaluation code normalizes with
 VOCABULARY_KEY = "evaluator_vocabulary"  # a GRU matcher's words, in our checkpoints
 
 
@@ -137,7 +144,7 @@ def released_interclip_state(checkpoint: Any, path: str | Path) -> dict[str, tor
 
 
 def released_t2m_state(checkpoint: Any, path: str | Path) -> dict[str, torch.Tensor]:
-    """T2M ``finest.tar`` -> GRUMatcher state dict (``<part>.<key>`` for the three parts)."""
+    """T2M ``finest.tar`` -> T2MMatcher state dict (``<part>.<key>`` for the three parts)."""
     if not isinstance(checkpoint, dict):
         raise ValueError(
             f"{path}: expected a dict with {T2M_PARTS}, got {type(checkpoint).__name__}"
@@ -149,6 +156,31 @@ def released_t2m_state(checkpoint: Any, path: str | Path) -> dict[str, torch.Ten
             f"(top-level keys: {sorted(map(str, checkpoint))})"
         )
     return {f"{part}.{k}": v for part in T2M_PARTS for k, v in checkpoint[part].items()}
+
+
+def released_t2m_input_size(checkpoint: dict[str, Any]) -> int | None:
+    """Channels per frame the file's movement encoder reads (None when it has no first conv)."""
+    weight = checkpoint["movement_encoder"].get(T2M_FIRST_CONV)
+    return int(weight.shape[1]) if isinstance(weight, torch.Tensor) and weight.ndim == 3 else None
+
+
+def default_t2m_meta_dir(path: str | Path) -> Path:
+    """``t2m/Comp_v6_KLD01/meta`` for ``t2m/text_mot_match/model/finest.tar`` (the release tree)."""
+    return Path(path).parent.parent.parent / T2M_META_RUN / "meta"
+
+
+def released_t2m_statistics(meta_dir: str | Path, *, feature_shape: tuple[int, ...]) -> Normalizer:
+    """The evaluator's own ``meta/mean.npy`` and ``meta/std.npy`` (errors name the files)."""
+    meta_dir = Path(meta_dir)
+    missing = [str(meta_dir / name) for name in T2M_META_FILES if not (meta_dir / name).is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"{', '.join(missing)}: the released evaluator's statistics are missing (T2M ships "
+            f"them as t2m/{T2M_META_RUN}/meta/, beside t2m/text_mot_match/model/finest.tar): "
+            f"pass meta_dir=<folder with {' and '.join(T2M_META_FILES)}>"
+        )
+    mean_path, std_path = (meta_dir / name for name in T2M_META_FILES)
+    return Normalizer.from_files(mean_path, std_path, feature_shape=feature_shape)
 
 
 def is_released_t2m(checkpoint: Any) -> bool:

@@ -7,22 +7,23 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from intermask.evaluator.gru_matcher import GRUMatcher
+from intermask.evaluator.gru_matcher import T2MMatcher
 from intermask.evaluator.interclip import InterCLIP
 
 
 class FrozenEvaluator(nn.Module):
-    """Protocol API around a trained :class:`InterCLIP` or :class:`GRUMatcher`.
+    """Protocol API around a trained :class:`InterCLIP` or T2M matcher (:class:`T2MMatcher`).
 
     Attributes:
         name: architecture and source, e.g. ``"interclip[released]"``,
             ``"t2m_gru+learned_words[trained:synthetic_interx]"``.
         file_hash: sha256 of the checkpoint file, first 16 hex digits.
-        dataset: ``"interhuman"`` or ``"interx"``: which motion layout ``encode_motion`` takes.
+        dataset: ``"interhuman"``, ``"interx"`` or ``"humanml3d"``: which motion layout
+            ``encode_motion`` takes.
         embed_dim: embedding size (512).
     """
 
-    def __init__(self, net: InterCLIP | GRUMatcher, *, name: str, file_hash: str) -> None:
+    def __init__(self, net: InterCLIP | T2MMatcher, *, name: str, file_hash: str) -> None:
         super().__init__()
         self.net = net
         self.name, self.file_hash = name, file_hash
@@ -47,8 +48,8 @@ class FrozenEvaluator(nn.Module):
     def encode_motion(self, motion: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
         """De-normalized motion + (B,) frame counts -> (B, 512) on the evaluator's device.
 
-        InterHuman: (B, 2, T, 262); Inter-X: (B, 2, T, 56, 6), as the datamodule's interaction
-        items give them after de-normalization. Rows stay in input order.
+        InterHuman: (B, 2, T, 262); Inter-X: (B, 2, T, 56, 6); HumanML3D: (B, T, 263), as the
+        datamodules' items give them after de-normalization. Rows stay in input order.
         """
         return self.net.encode_motion(motion, lengths).float()
 
@@ -56,7 +57,7 @@ class FrozenEvaluator(nn.Module):
     def encode_text(
         self, captions: Sequence[str], tokens: Sequence[str] | None = None
     ) -> torch.Tensor:
-        """B captions (+ Inter-X ``"word/POS ..."`` token strings) -> (B, 512)."""
+        """B captions (+ ``"word/POS ..."`` token strings for the T2M matchers) -> (B, 512)."""
         return self.net.encode_text(captions, tokens).float()
 
     def extra_repr(self) -> str:

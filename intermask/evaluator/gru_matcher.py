@@ -1,9 +1,15 @@
-"""The Inter-X evaluator: T2M's text-motion matcher (Guo et al. 2022) as InterMask uses it.
+"""T2M's text-motion matcher (Guo et al. 2022): the shared network and its Inter-X variant.
 
-Motion: de-normalized (B, 2, T, 56, 6) -> (B, T, 56, 12) = [P1 6 | P2 6] per row with the
-translation-velocity channels of row 55 zeroed -> (B, T, 672) -> movement encoder (two stride-2
-convolutions, T/4) -> BiGRU over length // 4 steps -> (B, 512). Text: word vector + POS one-hot
-per token -> BiGRU over the caption's tokens -> (B, 512). No L2 normalization.
+Every variant: motion (B, T, C) -> movement encoder (two stride-2 convolutions, T/4) -> BiGRU
+over length // 4 steps -> (B, 512); text: word vector + POS one-hot per token -> BiGRU over the
+caption's tokens -> (B, 512). No L2 normalization. :class:`T2MMatcher` owns this; a variant
+only says how its dataset's de-normalized motion becomes the (B, T, C) input
+(``prepare_motion``):
+
+* :class:`GRUMatcher` (Inter-X, InterMask's evaluator): (B, 2, T, 56, 6) -> (B, T, 56, 12) =
+  [P1 6 | P2 6] per row with the translation-velocity channels of row 55 zeroed -> (B, T, 672).
+* :class:`~intermask.evaluator.humanml3d_matcher.HumanML3DMatcher` (HumanML3D, T2M's and
+  MoMask's evaluator): (B, T, 263) z-scored with its own statistics, foot contacts dropped.
 
 Submodule names follow the released ``finest.tar`` (its ``movement_encoder``, ``text_encoder``
 and ``motion_encoder`` state dicts load into the same-named children). The word vectors live
@@ -116,8 +122,9 @@ class TextEncoderBiGRUCo(_BiGRUHead):
         return self._run(word_vectors + self.pos_emb(pos_one_hot), lengths)
 
 
-class GRUMatcher(nn.Module):
-    """T2M text-motion matcher for the Inter-X representation.
+class T2MMatcher(nn.Module):
+    """The T2M matcher without a motion layout; subclasses set the class attributes and define
+    ``check_motion`` and ``prepare_motion``.
 
     Args:
         word_vectors: "glove" (frozen, from ``glove_dir``; comparable to published numbers) or
@@ -125,32 +132,31 @@ class GRUMatcher(nn.Module):
         glove_dir, glove_prefix: the reference GloVe files (see ``vocabulary``).
         vocabulary: the words of the embedding when known at construction (rebuilding a trained
             evaluator); a learned evaluator otherwise gets them from ``set_vocabulary``.
-        max_words: tokens kept per caption before sos/eos (20, InterMask's Inter-X setting).
+        max_words: tokens kept per caption before sos/eos (20 in T2M and InterMask).
         unit_length: frames per movement step (4; the convolutions halve time twice).
         word_dim, movement_hidden, movement_latent, motion_hidden, text_hidden, embed_dim:
             T2M sizes (300, 512, 512, 1024, 512, 512).
-        rot6d_input: "as_is" feeds our 6D rotations unchanged; "pytorch3d" re-expresses them as
-            the first two matrix rows, the layout the released evaluator was trained on.
     """
 
-    dataset = "interx"
+    dataset: str  # the motion layout encode_motion takes ("interx", "humanml3d")
+    architecture_name: str  # the evaluator name's prefix
+    motion_input_size: int  # channels per frame the movement encoder reads (prepare_motion's C)
 
     def __init__(
         self,
         *,
-        word_vectors: WordVectors = "learned",
-        glove_dir: str | None = None,
-        glove_prefix: str = DEFAULT_GLOVE_PREFIX,
-        vocabulary: Sequence[str] | None = None,
-        max_words: int = DEFAULT_MAX_WORDS,
-        unit_length: int = 4,
-        word_dim: int = 300,
-        movement_hidden: int = 512,
-        movement_latent: int = 512,
-        motion_hidden: int = 1024,
-        text_hidden: int = 512,
-        embed_dim: int = 512,
-        rot6d_input: Rot6dInput = "as_is",
+        word_vectors: WordVectors,
+        glove_dir: str | None,
+        glove_prefix: str,
+        vocabulary: Sequence[str] | None,
+        max_words: int,
+        unit_length: int,
+        word_dim: int,
+        movement_hidden: int,
+        movement_latent: int,
+        motion_hidden: int,
+        text_hidden: int,
+        embed_dim: int,
     ) -> None:
         super().__init__()
         if word_vectors not in ("learned", "glove"):
@@ -161,13 +167,11 @@ class GRUMatcher(nn.Module):
             raise ValueError(
                 "glove_dir is given but word_vectors='learned': set word_vectors='glove'"
             )
-        if rot6d_input not in ("as_is", "pytorch3d"):
-            raise ValueError(f"rot6d_input must be 'as_is' or 'pytorch3d', got {rot6d_input!r}")
         self.word_source, self.word_dim = word_vectors, word_dim
-        self.max_words, self.unit_length, self.rot6d_input = max_words, unit_length, rot6d_input
+        self.max_words, self.unit_length = max_words, unit_length
         self.embed_dim = embed_dim
         self.movement_encoder = MovementConvEncoder(
-            input_size=NUM_ROWS * 2 * PERSON_CHANNELS,
+            input_size=self.motion_input_size,
             hidden_size=movement_hidden,
             output_size=movement_latent,
         )
@@ -190,7 +194,8 @@ class GRUMatcher(nn.Module):
 
     @property
     def architecture(self) -> str:
-        return f"t2m_gru+{'glove' if self.word_source == 'glove' else 'learned_words'}"
+        words = "glove" if self.word_source == "glove" else "learned_words"
+        return f"{self.architecture_name}+{words}"
 
     @property
     def device(self) -> torch.device:
@@ -224,25 +229,18 @@ class GRUMatcher(nn.Module):
             raise ValueError("a GloVe evaluator takes its vocabulary from the GloVe files")
         self._build_embedding(vocabulary, None)
 
+    def check_motion(self, motion: torch.Tensor) -> int:
+        """Raise unless ``motion`` has the variant's de-normalized layout; return its frame count."""
+        raise NotImplementedError
+
     def prepare_motion(self, motion: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
-        """(B, 2, T, 56, 6) -> (B, T, 672): persons side by side per row, velocities and padded
-        frames zeroed (the reference pads with zeros), 6D layout converted when configured."""
-        _check_motion(motion)
-        motion = motion.float().clone()
-        motion[:, :, :, TRANSLATION_ROW, 3:] = 0.0  # translation velocity (reference zeros it)
-        if self.rot6d_input == "pytorch3d":
-            # ours: first two columns, row by row; pytorch3d: the first two rows
-            matrix = rot6d_to_matrix(motion[:, :, :, :TRANSLATION_ROW])  # (B, 2, T, 55, 3, 3)
-            motion[:, :, :, :TRANSLATION_ROW] = matrix[..., :2, :].flatten(-2)
-        valid = length_mask(lengths.to(motion.device), motion.shape[2])
-        valid = valid[:, None, :, None, None]  # (B, 1, T, 1, 1)
-        motion = torch.where(valid, motion, 0.0)
-        return rearrange(motion, "b p t j c -> b t (j p c)")
+        """De-normalized motion + (B,) frame counts -> (B, T, motion_input_size)."""
+        raise NotImplementedError
 
     def encode_motion(self, motion: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
-        """De-normalized (B, 2, T, 56, 6) + (B,) frame counts -> (B, embed_dim)."""
-        _check_motion(motion)
-        lengths = check_lengths(lengths, batch=motion.shape[0], frames=motion.shape[2])
+        """De-normalized motion in the variant's layout + (B,) frame counts -> (B, embed_dim)."""
+        frames = self.check_motion(motion)
+        lengths = check_lengths(lengths, batch=motion.shape[0], frames=frames)
         if bool((lengths < self.unit_length).any()):
             raise ValueError(
                 f"every length must be >= unit_length {self.unit_length}, got min {int(lengths.min())}"
@@ -259,7 +257,7 @@ class GRUMatcher(nn.Module):
         check_captions(captions)
         if tokens is None:
             raise ValueError(
-                "the Inter-X evaluator reads POS-tagged tokens: pass tokens (the items' "
+                f"the {self.dataset} evaluator reads POS-tagged tokens: pass tokens (the items' "
                 "'tokens' strings, 'word/POS word/POS ...'), one per caption"
             )
         if len(tokens) != len(captions):
@@ -274,13 +272,76 @@ class GRUMatcher(nn.Module):
         return self.text_encoder(vectors, encoded.pos_one_hot.to(self.device), encoded.lengths)
 
 
-def _check_motion(motion: torch.Tensor) -> None:
-    if (
-        motion.ndim != 5
-        or motion.shape[1] != 2
-        or tuple(motion.shape[3:]) != (NUM_ROWS, PERSON_CHANNELS)
-    ):
-        raise ValueError(
-            "the Inter-X evaluator expects de-normalized motion (B, 2, T, 56, 6), "
-            f"got {tuple(motion.shape)}"
+class GRUMatcher(T2MMatcher):
+    """T2M text-motion matcher for the Inter-X representation.
+
+    Args: those of :class:`T2MMatcher` and
+        rot6d_input: "as_is" feeds our 6D rotations unchanged; "pytorch3d" re-expresses them as
+            the first two matrix rows, the layout the released evaluator was trained on.
+    """
+
+    dataset = "interx"
+    architecture_name = "t2m_gru"
+    motion_input_size = NUM_ROWS * 2 * PERSON_CHANNELS  # 672
+
+    def __init__(
+        self,
+        *,
+        word_vectors: WordVectors = "learned",
+        glove_dir: str | None = None,
+        glove_prefix: str = DEFAULT_GLOVE_PREFIX,
+        vocabulary: Sequence[str] | None = None,
+        max_words: int = DEFAULT_MAX_WORDS,
+        unit_length: int = 4,
+        word_dim: int = 300,
+        movement_hidden: int = 512,
+        movement_latent: int = 512,
+        motion_hidden: int = 1024,
+        text_hidden: int = 512,
+        embed_dim: int = 512,
+        rot6d_input: Rot6dInput = "as_is",
+    ) -> None:
+        if rot6d_input not in ("as_is", "pytorch3d"):
+            raise ValueError(f"rot6d_input must be 'as_is' or 'pytorch3d', got {rot6d_input!r}")
+        super().__init__(
+            word_vectors=word_vectors,
+            glove_dir=glove_dir,
+            glove_prefix=glove_prefix,
+            vocabulary=vocabulary,
+            max_words=max_words,
+            unit_length=unit_length,
+            word_dim=word_dim,
+            movement_hidden=movement_hidden,
+            movement_latent=movement_latent,
+            motion_hidden=motion_hidden,
+            text_hidden=text_hidden,
+            embed_dim=embed_dim,
         )
+        self.rot6d_input = rot6d_input
+
+    def check_motion(self, motion: torch.Tensor) -> int:
+        if (
+            motion.ndim != 5
+            or motion.shape[1] != 2
+            or tuple(motion.shape[3:]) != (NUM_ROWS, PERSON_CHANNELS)
+        ):
+            raise ValueError(
+                "the Inter-X evaluator expects de-normalized motion (B, 2, T, 56, 6), "
+                f"got {tuple(motion.shape)}"
+            )
+        return motion.shape[2]
+
+    def prepare_motion(self, motion: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        """(B, 2, T, 56, 6) -> (B, T, 672): persons side by side per row, velocities and padded
+        frames zeroed (the reference pads with zeros), 6D layout converted when configured."""
+        self.check_motion(motion)
+        motion = motion.float().clone()
+        motion[:, :, :, TRANSLATION_ROW, 3:] = 0.0  # translation velocity (reference zeros it)
+        if self.rot6d_input == "pytorch3d":
+            # ours: first two columns, row by row; pytorch3d: the first two rows
+            matrix = rot6d_to_matrix(motion[:, :, :, :TRANSLATION_ROW])  # (B, 2, T, 55, 3, 3)
+            motion[:, :, :, :TRANSLATION_ROW] = matrix[..., :2, :].flatten(-2)
+        valid = length_mask(lengths.to(motion.device), motion.shape[2])
+        valid = valid[:, None, :, None, None]  # (B, 1, T, 1, 1)
+        motion = torch.where(valid, motion, 0.0)
+        return rearrange(motion, "b p t j c -> b t (j p c)")

@@ -11,7 +11,8 @@ from torch.optim import Optimizer
 
 from intermask.data.normalization import Normalizer
 from intermask.evaluator.checkpoints import VOCABULARY_KEY
-from intermask.evaluator.gru_matcher import GRUMatcher
+from intermask.evaluator.gru_matcher import T2MMatcher
+from intermask.evaluator.humanml3d_matcher import HumanML3DMatcher
 from intermask.evaluator.interclip import InterCLIP
 from intermask.evaluator.losses import RetrievalAccuracy, clip_loss, margin_loss
 from intermask.evaluator.vocabulary import Vocabulary
@@ -22,12 +23,15 @@ LossKind = Literal["clip", "margin"]
 
 
 class EvaluatorModule(ScheduledModule):
-    """Trains :class:`InterCLIP` or :class:`GRUMatcher` on interaction batches.
+    """Trains :class:`InterCLIP` or a T2M matcher (:class:`GRUMatcher` for Inter-X,
+    :class:`HumanML3DMatcher`) on text-motion batches.
 
-    Batch: ``motion`` (B, 2, T, *F) as the datamodule gives it (normalized or not), ``length``
-    (B,), ``caption`` (B strings) and, on Inter-X, ``tokens`` (B ``"word/POS ..."`` strings).
-    The motion is de-normalized with the datamodule's statistics first: evaluators always see
-    feature units, exactly as the protocol feeds them.
+    Batch: ``motion`` as the datamodule gives it (normalized or not): (B, 2, T, *F) for the
+    interaction datasets, (B, T, 263) for HumanML3D; ``length`` (B,), ``caption`` (B strings) and,
+    for the T2M matchers, ``tokens`` (B ``"word/POS ..."`` strings). The motion is de-normalized
+    with the datamodule's statistics first: evaluators always see feature units, exactly as the
+    protocol feeds them. A HumanML3D matcher without statistics takes the datamodule's (the
+    training split's) as its own.
 
     Args:
         net: the evaluator network.
@@ -47,7 +51,7 @@ class EvaluatorModule(ScheduledModule):
     def __init__(
         self,
         *,
-        net: InterCLIP | GRUMatcher,
+        net: InterCLIP | T2MMatcher,
         optimizer: Callable[..., Optimizer],
         loss: LossKind,
         trained_on: str,
@@ -89,28 +93,35 @@ class EvaluatorModule(ScheduledModule):
         """Take the datamodule's statistics and, for a learned GRU vocabulary, its words."""
         datamodule = getattr(self.trainer, "datamodule", None) if self._trainer else None
         if datamodule is None:
-            raise RuntimeError(
-                "EvaluatorModule needs the InteractionDataModule (fit with datamodule=)"
-            )
+            raise RuntimeError("EvaluatorModule needs a datamodule (fit with datamodule=)")
         self._normalizer = datamodule.normalizer
-        if isinstance(self.net, GRUMatcher) and self.net.vocabulary is None:
+        if isinstance(self.net, HumanML3DMatcher) and not bool(self.net.has_statistics):
+            # a resumed run restores the checkpoint's statistics after this
+            if self._normalizer is None:
+                raise ValueError(
+                    "the HumanML3D matcher z-scores motion with the training split's statistics, "
+                    "but the datamodule has none (normalizer is None)"
+                )
+            self.net.set_statistics(
+                self._normalizer.mean, self._normalizer.std, source=self._normalizer.source
+            )
+        if isinstance(self.net, T2MMatcher) and self.net.vocabulary is None:
             if "train" not in datamodule.datasets:
                 datamodule.setup("fit")
             self.net.set_vocabulary(self._training_words(datamodule.datasets["train"]).words)
             log.info("learned word embedding over %d training words", len(self.net.vocabulary))
 
     def _training_words(self, dataset: Any) -> Vocabulary:
-        captions = getattr(dataset, "captions", None)
-        if not captions or not hasattr(captions[0][0], "tokens"):
+        strings = _token_strings(dataset)
+        if not strings:
             raise ValueError(
                 f"the GRU matcher reads POS-tagged tokens, but {type(dataset).__name__} has none "
-                "(use it with Inter-X data)"
+                "(use it with Inter-X or HumanML3D data)"
             )
-        strings = (caption.tokens for clip in captions for caption in clip)
         return Vocabulary.from_token_strings(strings, min_count=self.hparams.min_word_count)
 
     def denormalize(self, motion: torch.Tensor) -> torch.Tensor:
-        """(B, 2, T, *F) datamodule motion -> feature units."""
+        """(B, 2, T, *F) or (B, T, F) datamodule motion -> feature units."""
         return motion if self._normalizer is None else self._normalizer.denormalize(motion)
 
     # ------------------------------------------------------------------ steps
@@ -166,11 +177,28 @@ class EvaluatorModule(ScheduledModule):
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         # plain strings: the checkpoint still loads with weights_only=True
-        if isinstance(self.net, GRUMatcher) and self.net.vocabulary is not None:
+        if isinstance(self.net, T2MMatcher) and self.net.vocabulary is not None:
             checkpoint[VOCABULARY_KEY] = list(self.net.vocabulary.words)
 
     def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         words = checkpoint.get(VOCABULARY_KEY)
-        if isinstance(self.net, GRUMatcher) and words is not None:
+        if isinstance(self.net, T2MMatcher) and words is not None:
             # setup() built the vocabulary from today's data: it must be the checkpoint's
             self.net.set_vocabulary(words)
+
+
+def _token_strings(dataset: Any) -> list[str]:
+    """Every ``"word/POS ..."`` caption of a training split: Inter-X keeps ``captions`` per clip
+    (tokens one string), HumanML3D ``items`` with their captions (tokens a tuple)."""
+    if getattr(dataset, "captions", None):
+        clips = dataset.captions
+    else:
+        clips = [item.captions for item in getattr(dataset, "items", None) or []]
+    strings = []
+    for clip in clips:
+        for caption in clip:
+            tokens = getattr(caption, "tokens", None)
+            if tokens is None:
+                return []
+            strings.append(tokens if isinstance(tokens, str) else " ".join(tokens))
+    return strings

@@ -1,10 +1,11 @@
-"""Word vectors and part-of-speech classes for the Inter-X (T2M-style) text encoder.
+"""Word vectors and part-of-speech classes for the T2M-style text encoder (Inter-X, HumanML3D).
 
-Inter-X captions come with lemmatized, POS-tagged tokens (``"word/POS word/POS ..."``, the
-``texts_processed`` files; items carry them as ``"tokens"``). The T2M text encoder reads, per
-token, a 300-d word vector plus a 15-class POS one-hot; words of five small "VIP" lists override
-the tagger's class (a direction word is ``Loc_VIP`` whatever its tag). Every caption becomes
-``sos``, at most ``max_words`` tokens, ``eos``, padded with ``unk`` to ``max_words + 2``.
+Inter-X and HumanML3D captions come with lemmatized, POS-tagged tokens (``"word/POS word/POS
+..."``; Inter-X's ``texts_processed`` files, HumanML3D's ``texts``; items carry them as
+``"tokens"``). The T2M text encoder reads, per token, a 300-d word vector plus a 15-class POS
+one-hot; words of five small "VIP" lists override the tagger's class (a direction word is
+``Loc_VIP`` whatever its tag). Every caption becomes ``sos``, at most ``max_words`` tokens,
+``eos``, padded with ``unk`` to ``max_words + 2``.
 
 Word vectors come from one of two places:
 
@@ -67,8 +68,9 @@ VIP_WORDS = {
 VIP_CLASS = {word: cls for cls, words in VIP_WORDS.items() for word in words}
 START, END, UNKNOWN = "sos", "eos", "unk"
 SPECIAL_WORDS = (START, END, UNKNOWN)
-DEFAULT_MAX_WORDS = 20  # InterMask's Inter-X evaluator (max_text_len; 35 only for "hhi")
-DEFAULT_GLOVE_PREFIX = "hhi_vab"
+DEFAULT_MAX_WORDS = 20  # max_text_len of T2M (HumanML3D) and InterMask (Inter-X; 35 only for "hhi")
+DEFAULT_GLOVE_PREFIX = "hhi_vab"  # InterMask's Inter-X vocabulary
+HUMANML3D_GLOVE_PREFIX = "our_vab"  # T2M's HumanML3D vocabulary
 
 
 class EncodedTokens(NamedTuple):
