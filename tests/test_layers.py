@@ -20,7 +20,7 @@ STAGES = [
     ["text"],
     ["vq"],
     ["interm"],
-    ["evaluator", "reaction", "render"],
+    ["evaluator", "reaction", "render", "momask"],
     ["evaluation"],
     ["train", "generate", "convert"],
     ["evaluate", "overfit", "bench"],

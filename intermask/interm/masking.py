@@ -125,10 +125,10 @@ def random_masking(
     batch = tokens.shape[0]
     if tau is None:
         tau = _rand((batch,), tokens, generator).double()
-    return _scheduled_mask(valid, tau, generator)
+    return scheduled_mask(valid, tau, generator)
 
 
-def _scheduled_mask(
+def scheduled_mask(
     eligible: torch.Tensor, tau: torch.Tensor, generator: torch.Generator | None
 ) -> torch.Tensor:
     """(B, ...) bool -> ``ceil(gamma(tau) * n)`` (at least one) of each sample's ``n`` eligible
@@ -175,7 +175,7 @@ def solo_masking(
     tokens = stack_persons(tokens_a, tokens_b)
     valid = valid_tokens(tokens, lengths_in_steps)
     hidden = _one_person(tokens.shape[0], tokens, generator)
-    return _scheduled_mask(valid & ~hidden, tau, generator) | (valid & hidden)
+    return scheduled_mask(valid & ~hidden, tau, generator) | (valid & hidden)
 
 
 def training_mask(

@@ -1,0 +1,70 @@
+"""Tiny MoMask pieces for the tests: a 1D-token residual VQ-VAE over 263-d features, networks,
+batches."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from intermask.momask.model import MaskedTransformer, ResidualTransformer
+from intermask.vq.convolutions import MotionDecoder, MotionEncoder
+from intermask.vq.model import MotionVQVAE
+from intermask.vq.quantizers import ResidualQuantizer
+
+FEATURES = 263  # HumanML3D's feature vector
+CODES = 16
+LAYERS = 3
+TINY = {
+    "code_dim": 16,
+    "width": 32,
+    "depth": 1,
+    "heads": 2,
+    "ff": 64,
+    "dropout": 0.0,
+    "max_steps": 64,
+}
+CAPTIONS = ["a person walks forward", "someone jumps twice", "a man waves", "she sits down"]
+
+
+class FlatView(nn.Module):
+    """Stand-in view: a (B, T, 263) feature vector is one 'joint' of 263 channels."""
+
+    num_joints, channels, feature_shape = 1, FEATURES, (FEATURES,)
+
+    def to_joints(self, features: torch.Tensor) -> torch.Tensor:
+        return features[:, :, None, :]
+
+    def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
+        return joints[:, :, 0, :]
+
+
+def make_vq(layers: int = LAYERS, codes: int = CODES, seed: int = 0) -> MotionVQVAE:
+    torch.manual_seed(seed)
+    vq = MotionVQVAE(
+        view=FlatView(),
+        encoder=MotionEncoder(num_joints=1, in_channels=FEATURES, width=16, layout="1d"),
+        quantizer=ResidualQuantizer(num_quantizers=layers, codebook_size=codes, dim=16),
+        decoder=MotionDecoder(num_joints=1, out_channels=FEATURES, width=16, layout="1d"),
+    )
+    vq.train()(torch.randn(4, 64, FEATURES))  # initialise the codebooks from data
+    return vq.eval()
+
+
+def make_mask_net(seed: int = 1, **overrides: object) -> MaskedTransformer:
+    torch.manual_seed(seed)
+    return MaskedTransformer(**{"codebook_size": CODES, "text_dim": 64, **TINY, **overrides})
+
+
+def make_residual_net(seed: int = 2, **overrides: object) -> ResidualTransformer:
+    torch.manual_seed(seed)
+    config = {"codebook_size": CODES, "num_quantizers": LAYERS, "text_dim": 64, **TINY}
+    return ResidualTransformer(**{**config, **overrides})
+
+
+def make_batch(lengths=(64, 40, 30, 16), seed: int = 3) -> dict:
+    generator = torch.Generator().manual_seed(seed)
+    return {
+        "motion": torch.randn(len(lengths), 64, FEATURES, generator=generator),
+        "length": torch.tensor(lengths),
+        "caption": CAPTIONS[: len(lengths)],
+    }
