@@ -11,7 +11,7 @@ from omegaconf import DictConfig
 
 from intermask.interm.model import InterMTransformer
 from intermask.text.cache import TextFeatureCache
-from intermask.utils.files import open_run_checkpoint
+from intermask.utils.files import RunCheckpoint, open_run_checkpoint
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.run_config import check_targets
 from intermask.vq.load import load_vq
@@ -44,6 +44,13 @@ def check_vq_matches(
             f"{vq_path}: a VQ-VAE with {codes} codes x {rows} rows cannot decode the tokens of "
             f"{checkpoint} ({net.codebook_size} codes x {net.rows} rows)"
         )
+    check_vq_digest(vq, hyper_parameters, checkpoint, vq_path)
+
+
+def check_vq_digest(
+    vq: MotionVQVAE, hyper_parameters: dict, checkpoint: Path, vq_path: Path
+) -> None:
+    """Refuse a VQ-VAE whose weights are not those the checkpoint records (``vq_digest``)."""
     expected = hyper_parameters.get("vq_digest")
     if expected is None:
         log.warning(
@@ -59,15 +66,21 @@ def check_vq_matches(
         )
 
 
-def load_generator(
-    checkpoint: str | Path,
-    *,
-    vq_checkpoint: str | Path | None = None,
-    map_location: str = "cpu",
-) -> LoadedGenerator:
-    """checkpoint: ``<run>/checkpoints/<name>.ckpt`` of a train_gen run, or the run directory
-    (its last.ckpt). The transformer is rebuilt from ``<run>/config.yaml`` and loaded strictly;
-    the VQ-VAE comes from the run's ``vq_ckpt`` unless ``vq_checkpoint`` overrides it."""
+class GeneratorRun(NamedTuple):
+    """A train_gen run opened and checked, before anything is built."""
+
+    run: RunCheckpoint
+    net_config: DictConfig
+    text_config: DictConfig
+    vq_path: Path
+    hyper_parameters: dict
+
+
+def open_generator_run(
+    checkpoint: str | Path, *, vq_checkpoint: str | Path | None, map_location: str
+) -> GeneratorRun:
+    """Open a train_gen run's checkpoint and config; check its network and text targets and
+    that its tokenizer file exists (the run's ``vq_ckpt`` unless ``vq_checkpoint``)."""
     run = open_run_checkpoint(checkpoint, kind="generator", map_location=map_location)
     config, config_path = run.config, run.config_path
     if "vq_ckpt" not in config or "net" not in config.get("model", {}):
@@ -82,6 +95,21 @@ def load_generator(
             "vq_checkpoint= to point to it"
         )
     hyper_parameters = run.stored.get("hyper_parameters", {})
+    return GeneratorRun(run, net_config, text_config, vq_path, hyper_parameters)
+
+
+def load_generator(
+    checkpoint: str | Path,
+    *,
+    vq_checkpoint: str | Path | None = None,
+    map_location: str = "cpu",
+) -> LoadedGenerator:
+    """checkpoint: ``<run>/checkpoints/<name>.ckpt`` of a train_gen run, or the run directory
+    (its last.ckpt). The transformer is rebuilt from ``<run>/config.yaml`` and loaded strictly;
+    the VQ-VAE comes from the run's ``vq_ckpt`` unless ``vq_checkpoint`` overrides it."""
+    opened = open_generator_run(checkpoint, vq_checkpoint=vq_checkpoint, map_location=map_location)
+    run, net_config, text_config = opened.run, opened.net_config, opened.text_config
+    vq_path, hyper_parameters, config = opened.vq_path, opened.hyper_parameters, run.config
     net = instantiate(net_config)
     if not isinstance(net, InterMTransformer):  # the run took its codebook size from its VQ
         if "codebook_size" not in hyper_parameters:

@@ -29,6 +29,8 @@ LOADABLE_TARGETS: frozenset[str] = frozenset(
         "intermask.vq.convolutions.MotionDecoder",
         "intermask.vq.quantizers.ResidualQuantizer",
         "intermask.interm.model.InterMTransformer",
+        "intermask.momask.model.MaskedTransformer",
+        "intermask.momask.model.ResidualTransformer",
         "intermask.text.cache.TextFeatureCache",
         "intermask.text.clip_encoder.FrozenCLIPTextEncoder",
         "intermask.evaluator.interclip.InterCLIP",
