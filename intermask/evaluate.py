@@ -29,12 +29,14 @@ from intermask.evaluation.sources import (
     VQReconstruction,
     motion_joints,
 )
+from intermask.evaluation.text_motion import SoloReconstruction, TextToMotion
 from intermask.train import CONFIG_DIR
 from intermask.utils.files import file_hash, resolve_checkpoint
 from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
-MODES = ("interaction", "reaction", "reconstruction")
+MODES = ("interaction", "reaction", "reconstruction", "text_to_motion")
+SINGLE_PERSON = ("humanml3d",)  # dataset kinds of the text-to-motion table
 
 
 def pick_device(name: str) -> torch.device:
@@ -60,6 +62,16 @@ def build_sources(
     from intermask.vq.load import load_vq
 
     checkpoints: dict[str, str] = {}
+    single_person = cfg.data.dataset in SINGLE_PERSON
+    if single_person and cfg.mode not in ("text_to_motion", "reconstruction"):
+        raise ValueError(
+            f"mode={cfg.mode} does not apply to {cfg.data.dataset}: single-person data takes "
+            "mode=text_to_motion or reconstruction"
+        )
+    if cfg.mode == "text_to_motion" and not single_person:
+        raise ValueError(
+            f"mode=text_to_motion needs single-person data (data=humanml3d), got {cfg.data.dataset}"
+        )
     if cfg.mode == "reconstruction":
         if not cfg.vq_ckpt:
             raise ValueError(
@@ -67,7 +79,11 @@ def build_sources(
             )
         vq_path = resolve_checkpoint(cfg.vq_ckpt, kind="VQ")  # a run folder: its last.ckpt
         checkpoints["vq"] = f"{vq_path} ({file_hash(vq_path)})"
-        return [VQReconstruction(vq=load_vq(vq_path).to(device))], checkpoints
+        vq = load_vq(vq_path).to(device)
+        row = SoloReconstruction(vq=vq) if single_person else VQReconstruction(vq=vq)
+        return [row], checkpoints
+    if cfg.mode == "text_to_motion":
+        return _momask_rows(cfg, device, checkpoints), checkpoints
     arflow_ckpt = cfg.get("arflow_ckpt") if cfg.mode == "reaction" else None
     if not cfg.gen_ckpt and not arflow_ckpt:
         wanted = "gen_ckpt=<train_gen run or .ckpt>"
@@ -80,6 +96,51 @@ def build_sources(
     if arflow_ckpt:
         sources += _arflow_rows(cfg, normalizer, device, checkpoints)
     return sources, checkpoints
+
+
+def _momask_rows(cfg: DictConfig, device, checkpoints) -> list[MotionSource]:
+    """MoMask's rows of its Table 1: the tokenizer's reconstruction (``reconstruction_row``),
+    the base layer alone ("MoMask (base)"), and base + residual layers ("MoMask") when
+    ``residual_ckpt`` is given. Both generated rows draw the same base tokens per batch."""
+    from intermask.momask.load import load_momask_sampler
+    from intermask.momask.sampler import MoMaskSampler
+
+    if not cfg.mask_ckpt:
+        raise ValueError(
+            "mode=text_to_motion needs mask_ckpt=<masked transformer run> (and residual_ckpt=<"
+            "residual transformer run> for the full MoMask row)"
+        )
+    settings = OmegaConf.to_container(cfg.momask)
+    full, paths = load_momask_sampler(
+        cfg.mask_ckpt, cfg.residual_ckpt or None, vq_checkpoint=cfg.vq_ckpt or None, **settings
+    )
+    for role, path in paths.items():
+        checkpoints[role] = f"{path} ({file_hash(path)})"
+    checkpoints["text_encoder"] = full.text.encoder.extra_repr()
+    full.mask_net.to(device)
+    full.text.encoder.to(device)
+    if full.residual_net is not None:
+        full.residual_net.to(device)
+    base = MoMaskSampler(
+        mask_net=full.mask_net, residual_net=None, vq=full.vq.to(device), text=full.text, **settings
+    )
+
+    def rows_of(sampler: MoMaskSampler):
+        def generate(captions, lengths, seeds):
+            # one stream per batch, seeded by its first sample's protocol seed: reproducible, and
+            # the same base tokens for both rows
+            generator = torch.Generator(device=device).manual_seed(int(seeds[0]))
+            out = sampler(captions, lengths.to(device), generator=generator)
+            return sampler.vq.view.denormalize(out.features)
+
+        return generate
+
+    rows: list[MotionSource] = [TextToMotion(generate=rows_of(base), name="MoMask (base)")]
+    if full.residual_net is not None:
+        rows.append(TextToMotion(generate=rows_of(full), name="MoMask"))
+    if cfg.reconstruction_row:
+        rows.insert(0, SoloReconstruction(vq=full.vq))
+    return rows
 
 
 def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[MotionSource]:
@@ -171,9 +232,8 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     replications = cfg.fast_replications if cfg.fast else constants.replications
     constants = ProtocolConstants(**{**vars(constants), "replications": replications})
     device = pick_device(cfg.device)
-    datamodule = instantiate(
-        cfg.data, mode="interaction", eval_batch_size=constants.eval_batch_size
-    )
+    # the data config's own batch mode: interactions (two-person kinds) or text-motion items
+    datamodule = instantiate(cfg.data, eval_batch_size=constants.eval_batch_size)
     datamodule.prepare_data()
     datamodule.setup("test" if cfg.split == "test" else "validate")
     from intermask.evaluator import load_evaluator
@@ -209,7 +269,9 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         "fast": bool(cfg.fast),
         "evaluator": f"{evaluator.name} ({cfg.eval_ckpt}, sha256 {evaluator.file_hash})",
         **checkpoints,
-        "sampler": dict(OmegaConf.to_container(cfg.sampler)),
+        "sampler": dict(
+            OmegaConf.to_container(cfg.momask if cfg.mode == "text_to_motion" else cfg.sampler)
+        ),
         **(
             {"arflow_sampling": dict(OmegaConf.to_container(cfg.arflow))}
             if "arflow" in checkpoints

@@ -4,12 +4,12 @@ batches."""
 from __future__ import annotations
 
 import torch
-from torch import nn
 
 from intermask.momask.model import MaskedTransformer, ResidualTransformer
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.quantizers import ResidualQuantizer
+from intermask.vq.views import HumanML3DView
 
 FEATURES = 263  # HumanML3D's feature vector
 CODES = 16
@@ -26,22 +26,10 @@ TINY = {
 CAPTIONS = ["a person walks forward", "someone jumps twice", "a man waves", "she sits down"]
 
 
-class FlatView(nn.Module):
-    """Stand-in view: a (B, T, 263) feature vector is one 'joint' of 263 channels."""
-
-    num_joints, channels, feature_shape = 1, FEATURES, (FEATURES,)
-
-    def to_joints(self, features: torch.Tensor) -> torch.Tensor:
-        return features[:, :, None, :]
-
-    def from_joints(self, joints: torch.Tensor) -> torch.Tensor:
-        return joints[:, :, 0, :]
-
-
 def make_vq(layers: int = LAYERS, codes: int = CODES, seed: int = 0) -> MotionVQVAE:
     torch.manual_seed(seed)
     vq = MotionVQVAE(
-        view=FlatView(),
+        view=HumanML3DView(mean=torch.zeros(FEATURES), std=torch.ones(FEATURES)),
         encoder=MotionEncoder(num_joints=1, in_channels=FEATURES, width=16, layout="1d"),
         quantizer=ResidualQuantizer(num_quantizers=layers, codebook_size=codes, dim=16),
         decoder=MotionDecoder(num_joints=1, out_channels=FEATURES, width=16, layout="1d"),
