@@ -85,3 +85,25 @@ def test_every_switch_of_the_table_is_named_in_it():
         "experiment=eval_reference",
     ):
         assert switch in table, switch
+
+
+def test_momask_defaults_are_the_papers_reading_and_its_switches_are_named():
+    mask = _compose("train_gen", "data=humanml3d", "experiment=momask_mask", "vq_ckpt=x.ckpt")
+    assert mask.model.net.depth == 6  # row 11
+    assert abs(0.9 * mask.model.bert_mask_prob - 0.8) < 1e-12  # row 12: 80% [MASK] overall
+    residual = _compose(
+        "train_gen", "data=humanml3d", "experiment=momask_residual", "vq_ckpt=x.ckpt"
+    )
+    assert residual.model.layer_draw == "uniform"  # row 13
+    assert _compose("eval", "eval_ckpt=x.ckpt").momask.residual_temperature == 0.0  # row 14
+    rvq = _compose("train_vq", "data=humanml3d", "experiment=momask_rvq")
+    assert rvq.model.loss_kind == "l1"  # row 15
+    table = Path(CONFIG_DIR).parent.joinpath("docs", "fidelity.md").read_text()
+    for switch in (
+        "model.net.depth=8",
+        "model.bert_mask_prob=0.88",
+        "model.layer_draw=reference",
+        "momask.residual_temperature=1.0",
+        "model.loss_kind=smooth_l1",
+    ):
+        assert switch in table, switch
