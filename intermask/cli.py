@@ -1,8 +1,9 @@
 """The ``intermask`` console script.
 
 ``intermask data synth|check|stats|item|success-stats`` work on dataset folders; ``intermask
-generate`` turns captions (and optionally a reference or an edited motion) into interactions. Heavy imports happen
-inside the sub-commands so that ``intermask --help`` answers at once.
+generate`` turns captions (and optionally a reference or an edited motion) into interactions
+(Inter-M runs) or single-person motions (MoMask runs). Heavy imports happen inside the
+sub-commands so that ``intermask --help`` answers at once.
 """
 
 from __future__ import annotations
@@ -184,10 +185,22 @@ def _convert_reference(args: argparse.Namespace) -> int:
 def _add_generate_parser(commands) -> None:
     parser = commands.add_parser(
         "generate",
-        help="captions -> two-person interactions (npy, JSON, GIF, MP4, HTML)",
-        description="Defaults come from configs/generate.yaml and configs/sampler/paper.yaml.",
+        help="captions -> two-person interactions or one-person motions (npy, JSON, GIF, MP4, "
+        "HTML)",
+        description="Defaults come from configs/generate.yaml and configs/sampler/paper.yaml. "
+        "The kind of run is read from its config.yaml: an Inter-M run generates two persons, a "
+        "MoMask masked transformer run (with --residual, its residual transformer run) one "
+        "HumanML3D person at 20 fps.",
     )
-    parser.add_argument("--checkpoint", required=True, help="train_gen run directory or .ckpt")
+    parser.add_argument(
+        "--checkpoint",
+        required=True,
+        help="train_gen run directory or .ckpt: Inter-M, or MoMask's masked transformer",
+    )
+    parser.add_argument(
+        "--residual",
+        help="MoMask: the residual transformer run (default: decode the base layer alone)",
+    )
     parser.add_argument("--vq-checkpoint", help="override the run's VQ checkpoint path")
     parser.add_argument("--text", action="append", help="a caption (repeat for several)")
     parser.add_argument("--prompts", help="file with one caption per line")
@@ -197,10 +210,19 @@ def _add_generate_parser(commands) -> None:
     parser.add_argument("--samples", type=_positive_int, help="samples per caption (default 1)")
     parser.add_argument("--seed", type=int, help="first seed (default 0)")
     parser.add_argument(
-        "--cfg-scale", type=_non_negative_float, help="classifier-free guidance scale (2)"
+        "--cfg-scale",
+        type=_non_negative_float,
+        help="classifier-free guidance scale (2; MoMask: the masked transformer's, 4)",
     )
     parser.add_argument(
-        "--iterations", type=_positive_int, help="decoding iterations (20; reaction 12)"
+        "--residual-cfg-scale",
+        type=_non_negative_float,
+        help="MoMask: the residual transformer's guidance scale (5)",
+    )
+    parser.add_argument(
+        "--iterations",
+        type=_positive_int,
+        help="decoding iterations (20; reaction 12; MoMask 10)",
     )
     parser.add_argument(
         "--schedule",
@@ -219,8 +241,15 @@ def _add_generate_parser(commands) -> None:
     )
     parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
     parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")
+    parser.add_argument(
+        "--residual-temperature",
+        type=_non_negative_float,
+        help="MoMask: the residual layers' sampling temperature (0: greedy, the default)",
+    )
     parser.add_argument("--batch-size", type=_positive_int, help="samples per forward batch (32)")
-    parser.add_argument("--fps", type=_positive_float, help="frame rate of the dataset (30)")
+    parser.add_argument(
+        "--fps", type=_positive_float, help="frame rate of the dataset (30; MoMask 20)"
+    )
     parser.add_argument("--reaction", help="reference person's motion: person 1 stays fixed")
     parser.add_argument("--edit", help="two-person motion to edit (needs --frames)")
     parser.add_argument(

@@ -1,10 +1,20 @@
-"""Text (and optionally a reference or an edited motion) to two-person interactions on disk.
+"""Text (and optionally a reference or an edited motion) to motions on disk: two-person
+interactions from an Inter-M run, single-person motions from a MoMask run.
 
-``intermask generate --text "two people shake hands" --seconds 4 --samples 2`` loads a train_gen
-run, generates every (caption, sample) pair in batches, and writes per sample: ``joints.npy``
-(T, 2, 22, 3) metres Y-up, ``features.npy`` (2, T, *F) in the dataset representation
-(de-normalized), ``sample.json`` (caption, settings, seed, checkpoint hashes) and the renderings.
-Defaults live in ``configs/generate.yaml``.
+``intermask generate --checkpoint RUN --text "two people shake hands" --seconds 4 --samples 2``
+loads a train_gen run, generates every (caption, sample) pair, and writes per sample:
+``joints.npy`` (T, P, 22, 3) metres Y-up, ``features.npy`` (P, T, *F) in the dataset
+representation (de-normalized), ``sample.json`` (caption, settings, seed, checkpoint hashes) and
+the renderings (GIF, MP4, HTML). Defaults live in ``configs/generate.yaml``.
+
+The kind of run is read from its ``config.yaml`` (``model._target_``). Inter-M runs give P = 2
+persons at the dataset's rate (30 fps). A MoMask masked transformer run (``MaskTransformerModule``),
+optionally with its residual transformer run (``--residual RUN``; without it the base layer
+alone is decoded), gives one HumanML3D person (P = 1, F = 263) at 20 fps, at most 196 frames:
+``intermask generate --checkpoint MASK_RUN --residual RESIDUAL_RUN --text "a person walks
+forward" --seconds 4 --samples 2``. Each MoMask sample is generated on its own from its own
+seeded generator, so its recorded seed reproduces it whatever else was generated with it; the
+options of two-person decoding (``--persons``, ``--reaction``, ``--edit`` ...) are refused.
 """
 
 from __future__ import annotations
@@ -35,10 +45,35 @@ from intermask.interm.decoding import (
 )
 from intermask.interm.load import LoadedGenerator, load_generator
 from intermask.interm.sampler import InteractionSampler
-from intermask.utils.files import file_hash
+from intermask.momask.load import load_momask_sampler
+from intermask.momask.sampler import MoMaskSampler
+from intermask.motion import humanml3d as hml
+from intermask.utils.files import file_hash, open_run_checkpoint
 from intermask.vq.model import FRAMES_PER_STEP
 
-MAX_FRAMES = {"interhuman": 300, "interx": 148}  # longest training clips (multiples of 4)
+# longest training clips (multiples of 4); HumanML3D: MoMask's 196 frames
+MAX_FRAMES = {"interhuman": 300, "interx": 148, "humanml3d": 196}
+# model._target_ of a MoMask train_gen run -> its role
+MASK_MODULE = "intermask.momask.module.MaskTransformerModule"
+RESIDUAL_MODULE = "intermask.momask.module.ResidualTransformerModule"
+MOMASK_MODULES = {MASK_MODULE: "mask", RESIDUAL_MODULE: "residual"}
+# Request fields of two-person decoding -> their option, refused with a MoMask run
+INTERM_ONLY = {
+    "persons": "--persons",
+    "schedule": "--schedule",
+    "noise": "--noise",
+    "reaction": "--reaction",
+    "edit": "--edit",
+    "frames_range": "--frames",
+    "person": "--person",
+    "batch_size": "--batch-size",
+}
+# Request fields of MoMask decoding -> their option, refused with an Inter-M run
+MOMASK_ONLY = {
+    "residual": "--residual",
+    "residual_cfg_scale": "--residual-cfg-scale",
+    "residual_temperature": "--residual-temperature",
+}
 
 
 @dataclass(frozen=True)
@@ -56,14 +91,32 @@ class Settings:
     fps: float = 30.0
 
 
+@dataclass(frozen=True)
+class MoMaskSettings:
+    """Decoding settings of a MoMask job: :class:`MoMaskSampler`'s arguments (MoMask section 4;
+    defaults in configs/generate.yaml ``momask``), and the frame rate of the data (HumanML3D)."""
+
+    iterations: int
+    mask_cfg_scale: float
+    residual_cfg_scale: float
+    top_k_ratio: float
+    temperature: float
+    residual_temperature: float
+    fps: float = float(hml.FPS)
+
+    def sampler_arguments(self) -> dict[str, Any]:
+        """The keyword arguments of :func:`load_momask_sampler` (everything but ``fps``)."""
+        return {k: v for k, v in asdict(self).items() if k != "fps"}
+
+
 @dataclass
 class Sample:
     caption: str | None
     index: int  # sample number of this caption
     seed: int
-    joints: np.ndarray | None  # (T, 2, 22, 3)
-    features: np.ndarray  # (2, T, *F)
-    mode: str  # "interaction" | "reaction" | "edit"
+    joints: np.ndarray | None  # (T, P, 22, 3): P = 2 (Inter-M) or 1 (MoMask)
+    features: np.ndarray  # (P, T, *F)
+    mode: str  # "interaction" | "reaction" | "edit" | "text_to_motion"
 
 
 def default_settings() -> dict[str, Any]:
@@ -275,12 +328,6 @@ def write_sample(
     renders: Sequence[str],
 ) -> dict[str, Path]:
     """Write the arrays, the JSON record and the requested renders -> {kind: path}."""
-    directory.mkdir(parents=True, exist_ok=True)
-    paths = {"features": directory / "features.npy", "json": directory / "sample.json"}
-    np.save(paths["features"], sample.features.astype(np.float32))
-    if sample.joints is not None:
-        paths["joints"] = directory / "joints.npy"
-        np.save(paths["joints"], sample.joints.astype(np.float32))
     record = {
         "caption": sample.caption,
         "mode": sample.mode,
@@ -292,9 +339,60 @@ def write_sample(
         "vq": {"path": str(generator.vq_checkpoint), "sha256": file_hash(generator.vq_checkpoint)},
         "text_encoder": generator.text.encoder.extra_repr(),
     }
+    return _write_files(sample, directory, record, fps=settings.fps, renders=renders)
+
+
+def write_momask_sample(
+    sample: Sample,
+    directory: Path,
+    *,
+    checkpoints: dict[str, Path],
+    text_encoder: str,
+    settings: MoMaskSettings,
+    renders: Sequence[str],
+) -> dict[str, Path]:
+    """The MoMask counterpart of :func:`write_sample`: the record names the masked transformer,
+    the residual one (null for the base layer alone) and the tokenizer by path and hash, and its
+    ``settings`` are the sampler's arguments."""
+
+    def named(role: str) -> dict[str, str] | None:
+        path = checkpoints.get(role)
+        return None if path is None else {"path": str(path), "sha256": file_hash(path)}
+
+    record = {
+        "caption": sample.caption,
+        "mode": sample.mode,
+        "model": "momask",
+        "sample": sample.index,
+        "seed": sample.seed,
+        "frames": int(sample.features.shape[1]),
+        "fps": settings.fps,
+        "settings": settings.sampler_arguments(),
+        "mask": named("mask"),
+        "residual": named("residual"),
+        "vq": named("vq"),
+        "text_encoder": text_encoder,
+    }
+    return _write_files(sample, directory, record, fps=settings.fps, renders=renders)
+
+
+def _write_files(
+    sample: Sample,
+    directory: Path,
+    record: dict[str, Any],
+    *,
+    fps: float,
+    renders: Sequence[str],
+) -> dict[str, Path]:
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = {"features": directory / "features.npy", "json": directory / "sample.json"}
+    np.save(paths["features"], sample.features.astype(np.float32))
+    if sample.joints is not None:
+        paths["joints"] = directory / "joints.npy"
+        np.save(paths["joints"], sample.joints.astype(np.float32))
     paths["json"].write_text(json.dumps(record, indent=2) + "\n")
     if sample.joints is not None and renders:
-        paths |= render_sample(sample, directory, fps=settings.fps, renders=renders)
+        paths |= render_sample(sample, directory, fps=fps, renders=renders)
     return paths
 
 
@@ -342,9 +440,11 @@ def render_sample(
 @dataclass(frozen=True)
 class Request:
     """What ``intermask generate`` was asked (the CLI's options, parsed and range-checked);
-    None takes the value of configs/generate.yaml and its sampler group."""
+    None takes the value of configs/generate.yaml and its sampler group (MoMask runs: its
+    ``momask`` block)."""
 
     checkpoint: str
+    residual: str | None = None  # MoMask: the residual transformer run
     text: list[str] | None = None
     prompts: str | None = None
     vq_checkpoint: str | None = None
@@ -352,7 +452,9 @@ class Request:
     length_frames: int | None = None
     samples: int | None = None
     seed: int | None = None
-    cfg_scale: float | None = None
+    cfg_scale: float | None = None  # MoMask: the masked transformer's
+    residual_cfg_scale: float | None = None
+    residual_temperature: float | None = None
     iterations: int | None = None
     top_k: float | None = None
     temperature: float | None = None
@@ -372,9 +474,19 @@ class Request:
 
 def run(request: Request) -> list[Path]:
     """The generate job: captions (or a reaction / edit input) -> sample folders with arrays,
-    JSON and renders; returns the folders. Inputs are checked before the generator is loaded,
-    and no existing sample folder is overwritten."""
+    JSON and renders; returns the folders. A MoMask run (read from its config) goes to
+    :func:`run_momask`. Inputs are checked before the generator is loaded, and no existing
+    sample folder is overwritten."""
     defaults = default_settings()
+    target = run_target(request.checkpoint)
+    if target in MOMASK_MODULES:
+        return run_momask(request, MOMASK_MODULES[target], defaults)
+    given = [option for name, option in MOMASK_ONLY.items() if getattr(request, name) is not None]
+    if given:
+        raise ValueError(
+            f"{given[0]} applies to MoMask runs only; --checkpoint {request.checkpoint} is not "
+            f"a MoMask masked transformer run (its model is {target or 'not named'})"
+        )
     if bool(request.text) == bool(request.prompts) and not request.reaction:
         raise ValueError("give captions with --text or --prompts (one of them)")
     captions: list[str | None] = list(request.text or [])
@@ -452,6 +564,142 @@ def run(request: Request) -> list[Path]:
         print(
             f"{directory}: {sample.mode}, {frames_out} frames ({frames_out / fps:.1f} s), seed "
             f"{sample.seed}, {sample.caption or '(no text)'!r} -> {', '.join(sorted(paths))}"
+        )
+    print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
+    return folders
+
+
+def run_target(checkpoint: str | Path) -> str:
+    """``model._target_`` of a train_gen run's config.yaml ("" when it names none): what tells
+    a MoMask run (:data:`MOMASK_MODULES`) from an Inter-M one. Only the config is read."""
+    config = open_run_checkpoint(checkpoint, kind="generator").config
+    return str(OmegaConf.select(config, "model._target_", default=""))
+
+
+def momask_settings(request: Request, defaults: dict[str, Any]) -> MoMaskSettings:
+    """The request's MoMask decoding settings, each missing one from configs/generate.yaml."""
+    base = defaults["momask"]
+
+    def pick(value: Any, key: str) -> Any:
+        return base[key] if value is None else value
+
+    return MoMaskSettings(
+        iterations=int(pick(request.iterations, "iterations")),
+        mask_cfg_scale=float(pick(request.cfg_scale, "mask_cfg_scale")),
+        residual_cfg_scale=float(pick(request.residual_cfg_scale, "residual_cfg_scale")),
+        top_k_ratio=float(pick(request.top_k, "top_k_ratio")),
+        temperature=float(pick(request.temperature, "temperature")),
+        residual_temperature=float(pick(request.residual_temperature, "residual_temperature")),
+        fps=float(pick(request.fps, "fps")),
+    )
+
+
+def generate_momask_samples(
+    sampler: MoMaskSampler,
+    captions: Sequence[str],
+    *,
+    frames: int,
+    samples: int,
+    seed: int,
+    progress: bool = False,
+) -> list[Sample]:
+    """Every caption x ``samples``, one sampler call each: sample k of caption c draws from a
+    generator seeded ``seed + c * samples + k`` on the networks' device, so its seed alone
+    reproduces it. Features are de-normalized (1, T, 263), joints (T, 1, 22, 3)."""
+    jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
+    lengths = torch.tensor([frames])
+    results: list[Sample] = []
+    for c, k in _progress(jobs, enabled=progress, total=len(jobs)):
+        sample_seed = seed + c * samples + k
+        generator = torch.Generator(device=sampler.device).manual_seed(sample_seed)
+        out = sampler([captions[c]], lengths, generator=generator)
+        features = sampler.vq.view.denormalize(out.features[:, :frames]).float()  # (1, T, 263)
+        joints = hml.recover_from_ric(features).transpose(0, 1)  # (T, 1, 22, 3)
+        results.append(
+            Sample(
+                captions[c],
+                k,
+                sample_seed,
+                joints.cpu().numpy(),
+                features.cpu().numpy(),
+                "text_to_motion",
+            )
+        )
+    return results
+
+
+def run_momask(request: Request, role: str, defaults: dict[str, Any]) -> list[Path]:
+    """:func:`run` for a MoMask masked transformer run (``role`` of :data:`MOMASK_MODULES`), with
+    ``request.residual`` its optional residual transformer run: captions -> single-person
+    sample folders. Inputs are checked before the networks are loaded."""
+    if role != "mask":
+        raise ValueError(
+            f"--checkpoint {request.checkpoint}: a MoMask residual transformer run; pass the "
+            "masked transformer run as --checkpoint and this one as --residual"
+        )
+    given = [option for name, option in INTERM_ONLY.items() if getattr(request, name) is not None]
+    if given:
+        raise ValueError(
+            f"{given[0]} does not apply to a MoMask run: --checkpoint {request.checkpoint} "
+            "generates one person from text, each sample on its own"
+        )
+    if request.residual is not None:
+        residual = run_target(request.residual)
+        if MOMASK_MODULES.get(residual) != "residual":
+            raise ValueError(
+                f"--residual {request.residual}: not a MoMask residual transformer run (its "
+                f"model is {residual or 'not named'}, not {RESIDUAL_MODULE})"
+            )
+    if bool(request.text) == bool(request.prompts):
+        raise ValueError("give captions with --text or --prompts (one of them)")
+    captions = list(request.text) if request.text else read_prompts(request.prompts)
+    settings = momask_settings(request, defaults)
+    seconds = request.seconds if request.length_frames is None else None
+    if seconds is None and request.length_frames is None:
+        seconds = defaults["seconds"]
+    frames = frames_from(
+        seconds=seconds,
+        frames=request.length_frames,
+        fps=settings.fps,
+        max_frames=MAX_FRAMES["humanml3d"],
+    )
+    count = request.samples or defaults["samples"]
+    out = Path(request.out or defaults["out"])
+    folders = sample_folders(captions, count, out)
+    sampler, checkpoints = load_momask_sampler(
+        request.checkpoint,
+        request.residual,
+        vq_checkpoint=request.vq_checkpoint,
+        **settings.sampler_arguments(),
+    )
+    device = request.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    for net in (sampler.mask_net, sampler.residual_net, sampler.vq, sampler.text.encoder):
+        if net is not None:
+            net.to(device)
+    start = time.perf_counter()
+    samples = generate_momask_samples(
+        sampler,
+        captions,
+        frames=frames,
+        samples=count,
+        seed=defaults["seed"] if request.seed is None else request.seed,
+        progress=True,
+    )
+    renders = [] if request.no_render else list(defaults["renders"])
+    text_encoder = sampler.text.encoder.extra_repr()
+    layers = "base + residual layers" if sampler.residual_net is not None else "base layer"
+    for sample, directory in zip(samples, folders, strict=True):
+        paths = write_momask_sample(
+            sample,
+            directory,
+            checkpoints=checkpoints,
+            text_encoder=text_encoder,
+            settings=settings,
+            renders=renders,
+        )
+        print(
+            f"{directory}: MoMask ({layers}), {frames} frames ({frames / settings.fps:.1f} s), "
+            f"seed {sample.seed}, {sample.caption!r} -> {', '.join(sorted(paths))}"
         )
     print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
     return folders
