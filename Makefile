@@ -17,7 +17,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo overfit bench tb clean checkpoints
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo demo-momask overfit bench tb clean checkpoints
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -111,6 +111,23 @@ demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator,
 	@echo; cat $(DEMO_DIR)/eval/results.md
 	@echo; echo "demo done: table $(DEMO_DIR)/eval/results.md; checkpoints $(DEMO_DIR)/{evaluator,vq,gen}/checkpoints;" \
 		"samples $(DEMO_DIR)/samples/*/{animation.gif,viewer.html}; logs: make tb LOGDIR=$(DEMO_DIR)"
+
+MOMASK_DIR ?= outputs/demo_momask
+
+demo-momask: install ## MoMask on the synthetic HumanML3D-layout data, CPU-sized: evaluator, RVQ, masked + residual transformers, protocol, samples
+	rm -rf $(MOMASK_DIR)
+	$(PY) -m intermask.train --config-name train_evaluator experiment=evaluator_humanml3d_demo hydra.run.dir=$(MOMASK_DIR)/evaluator
+	$(PY) -m intermask.train --config-name train_vq data=synthetic_humanml3d experiment=momask_rvq_demo hydra.run.dir=$(MOMASK_DIR)/rvq
+	$(PY) -m intermask.train --config-name train_gen experiment=momask_mask_demo hydra.run.dir=$(MOMASK_DIR)/mask \
+		vq_ckpt=$(MOMASK_DIR)/rvq/checkpoints/last.ckpt
+	$(PY) -m intermask.train --config-name train_gen experiment=momask_residual_demo hydra.run.dir=$(MOMASK_DIR)/residual \
+		vq_ckpt=$(MOMASK_DIR)/rvq/checkpoints/last.ckpt
+	$(PY) -m intermask.evaluate data=synthetic_humanml3d mode=text_to_motion reconstruction_row=true \
+		hydra.run.dir=$(MOMASK_DIR)/eval mask_ckpt=$(MOMASK_DIR)/mask residual_ckpt=$(MOMASK_DIR)/residual \
+		eval_ckpt=$$(ls $(MOMASK_DIR)/evaluator/checkpoints/best*.ckpt | head -n 1)
+	$(VENV)/bin/intermask generate --checkpoint $(MOMASK_DIR)/mask --residual $(MOMASK_DIR)/residual \
+		--text "a person walks forward" --text "a person waves" --seconds 4 --samples 1 --out $(MOMASK_DIR)/samples
+	@echo; cat $(MOMASK_DIR)/eval/results.md
 
 OVERFIT_DIR ?= outputs/overfit
 
