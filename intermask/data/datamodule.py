@@ -57,6 +57,30 @@ class EpochDataModule(LightningDataModule):
     datasets: dict[str, Dataset]
     normalizer: Normalizer | None
 
+    def _set_loading(
+        self,
+        *,
+        batch_size: int,
+        eval_batch_size: int | None,
+        num_workers: int,
+        pin_memory: bool,
+        persistent_workers: bool,
+        drop_last: bool,
+        seed: int,
+        eval_shuffle: bool,
+    ) -> None:
+        """The loader settings every subclass takes (checked), and no data yet."""
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        self.batch_size = batch_size
+        self.eval_batch_size = eval_batch_size or batch_size
+        self.num_workers, self.pin_memory = num_workers, pin_memory
+        self.persistent_workers = persistent_workers and num_workers > 0
+        self.drop_last = drop_last
+        self.seed, self.eval_shuffle = seed, eval_shuffle
+        self.normalizer = None
+        self.datasets = {}
+
     def load_normalizer(self) -> Normalizer | None:
         raise NotImplementedError
 
@@ -213,15 +237,18 @@ class InteractionDataModule(EpochDataModule):
         self.reader = reader_class(dataset, reader)
         if mode not in ("interaction", "window"):
             raise ValueError(f"mode must be 'interaction' or 'window', got {mode!r}")
-        if batch_size < 1:
-            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.save_hyperparameters()
+        self._set_loading(
+            batch_size=batch_size,
+            eval_batch_size=eval_batch_size,
+            num_workers=num_workers,
+            pin_memory=pin_memory,
+            persistent_workers=persistent_workers,
+            drop_last=drop_last,
+            seed=seed,
+            eval_shuffle=eval_shuffle,
+        )
         self.dataset, self.root, self.mode = dataset, Path(root), mode
-        self.batch_size = batch_size
-        self.eval_batch_size = eval_batch_size or batch_size
-        self.num_workers, self.pin_memory = num_workers, pin_memory
-        self.persistent_workers = persistent_workers and num_workers > 0
-        self.drop_last = drop_last
         self.max_length = max_length or self.reader.default_max_length
         self.min_length = min_length or self.reader.default_min_length
         self.window, self.stride, self.window_persons = window, stride, window_persons
@@ -238,11 +265,8 @@ class InteractionDataModule(EpochDataModule):
         self.normalize = self.reader.default_normalize if normalize is None else normalize
         self.stats_dir = Path(stats_dir) if stats_dir else default_stats_dir(root)
         self.compute_stats = compute_stats
-        self.seed, self.eval_shuffle = seed, eval_shuffle
         self.synthesize_if_missing = synthesize_if_missing
         self.synthetic_clips, self.synthetic_seed = synthetic_clips, synthetic_seed
-        self.normalizer: Normalizer | None = None
-        self.datasets: dict[str, ClipReader] = {}
 
     @property
     def feature_shape(self) -> tuple[int, ...]:

@@ -68,23 +68,23 @@ class TextMotionDataModule(EpochDataModule):
             raise ValueError(f"dataset must be 'humanml3d', got {dataset!r}")
         if mode not in ("window", "item"):
             raise ValueError(f"mode must be 'window' or 'item', got {mode!r}")
-        if batch_size < 1:
-            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.save_hyperparameters()
+        self._set_loading(
+            batch_size=batch_size,
+            eval_batch_size=eval_batch_size,
+            num_workers=num_workers,
+            pin_memory=pin_memory,
+            persistent_workers=persistent_workers,
+            drop_last=drop_last,
+            seed=seed,
+            eval_shuffle=eval_shuffle,
+        )
         self.dataset, self.root, self.mode = dataset, Path(root), mode
-        self.batch_size = batch_size
-        self.eval_batch_size = eval_batch_size or batch_size
-        self.num_workers, self.pin_memory = num_workers, pin_memory
-        self.persistent_workers = persistent_workers and num_workers > 0
-        self.drop_last = drop_last
         self.window, self.stride = window, stride
         self.max_length, self.min_length, self.max_frames = max_length, min_length, max_frames
         self.unit_length, self.length_jitter = unit_length, length_jitter
-        self.seed, self.eval_shuffle = seed, eval_shuffle
         self.synthesize_if_missing = synthesize_if_missing
         self.synthetic_clips, self.synthetic_seed = synthetic_clips, synthetic_seed
-        self.normalizer: Normalizer | None = None
-        self.datasets: dict[str, HumanML3DDataset | HumanML3DWindows] = {}
 
     def prepare_data(self) -> None:
         """Rank zero only: synthesize the dataset when ``root`` is missing and asked to."""
