@@ -127,10 +127,10 @@ def _momask_rows(cfg: DictConfig, device, checkpoints) -> list[MotionSource]:
 
     def rows_of(sampler: MoMaskSampler):
         def generate(captions, lengths, seeds):
-            # one stream per batch, seeded by its first sample's protocol seed: reproducible, and
-            # the same base tokens for both rows
-            generator = torch.Generator(device=device).manual_seed(int(seeds[0]))
-            out = sampler(captions, lengths.to(device), generator=generator)
+            # one generator per sample, seeded by its protocol seed: a sample does not depend on
+            # its batch, and both rows draw the same base tokens
+            generators = [torch.Generator(device=device).manual_seed(int(s)) for s in seeds]
+            out = sampler(captions, lengths.to(device), generator=generators)
             return sampler.vq.view.denormalize(out.features)
 
         return generate

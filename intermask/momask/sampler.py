@@ -115,10 +115,23 @@ def _text_or_null(text: torch.Tensor | None, batch: int, dim: int, device) -> to
     return text.to(device)
 
 
+Generators = torch.Generator | Sequence[torch.Generator] | None
+
+
+def per_sample(generator: Generators, batch: int) -> list[torch.Generator | None]:
+    """One generator per sample: a sequence is taken as is (one each, so a sample's draw
+    depends only on its own generator), a single generator (or None) draws the whole batch."""
+    if isinstance(generator, Sequence):
+        if len(generator) != batch:
+            raise ValueError(f"got {len(generator)} generators for {batch} samples")
+        return list(generator)
+    return [generator] * batch
+
+
 def _sample(
     logits: torch.Tensor,
     lengths_in_steps: torch.Tensor,
-    generator: torch.Generator | None,
+    generator: Generators,
     temperature: float,
     top_k_ratio: float,
 ) -> torch.Tensor:
@@ -127,8 +140,9 @@ def _sample(
     if temperature == 0:
         return logits.argmax(dim=-1)
     filtered = top_k_filter(logits, top_k_ratio)
-    generators = [generator] * logits.shape[0]
-    return sample_codes(filtered, lengths_in_steps, generators, temperature)
+    return sample_codes(
+        filtered, lengths_in_steps, per_sample(generator, logits.shape[0]), temperature
+    )
 
 
 @torch.no_grad()
@@ -142,7 +156,7 @@ def decode_base(
     cfg_scale: float = MASK_CFG_SCALE,
     top_k_ratio: float = TOP_K_RATIO,
     temperature: float = TEMPERATURE,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
 ) -> torch.Tensor:
     """Mask-predict decoding of the base layer -> (B, T') codes, -1 at steps beyond a length.
 
@@ -152,7 +166,7 @@ def decode_base(
             longest.
         iterations: L forward passes.
         cfg_scale, top_k_ratio, temperature: see the module docstring; temperature 0 is greedy.
-        generator: source of the sampling noise.
+        generator: source of the sampling noise, or one generator per sample.
     """
     if iterations < 1:
         raise ValueError(f"iterations must be at least 1, got {iterations}")
@@ -192,7 +206,7 @@ def decode_residual(
     cfg_scale: float = RESIDUAL_CFG_SCALE,
     temperature: float = RESIDUAL_TEMPERATURE,
     top_k_ratio: float = TOP_K_RATIO,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
     layers: int | None = None,
 ) -> torch.Tensor:
     """Layers 1..``layers`` (default Q-1) from the base layer -> (B, Q, T') codes, -1 beyond
@@ -300,10 +314,12 @@ class MoMaskSampler:
         captions: Sequence[str] | None,
         lengths: torch.Tensor,
         *,
-        generator: torch.Generator | None = None,
+        generator: Generators = None,
     ) -> torch.Tensor:
         """B captions (None: unconditional) and (B,) frames -> (B, Q, 1, T') codes, T' the
-        longest length // 4; lengths are rounded down to a multiple of 4 (at least 4)."""
+        longest length // 4; lengths are rounded down to a multiple of 4 (at least 4).
+        ``generator``: one for the batch, or one per sample (then a sample's codes depend on its
+        own generator only)."""
         lengths = torch.as_tensor(lengths, device=self.device).long()
         if lengths.ndim != 1 or bool((lengths < FRAMES_PER_STEP).any()):
             raise ValueError(
@@ -346,7 +362,7 @@ class MoMaskSampler:
         captions: Sequence[str] | None,
         lengths: torch.Tensor,
         *,
-        generator: torch.Generator | None = None,
+        generator: Generators = None,
     ) -> MoMaskSample:
         """Generate B motions: :meth:`tokens`, then the VQ-VAE decoder."""
         tokens = self.tokens(captions, lengths, generator=generator)

@@ -145,3 +145,16 @@ def test_wrong_runs_and_tokenizers_are_refused(runs, tmp_path):
     )
     with pytest.raises(ValueError, match="not the VQ-VAE .* was trained on"):
         load_momask(runs["mask"], vq_checkpoint=other_folder / "checkpoints" / "last.ckpt")
+
+
+def test_per_sample_generators_make_a_sample_independent_of_its_batch(runs):
+    sampler, _ = load_momask_sampler(runs["mask"], runs["residual"])
+
+    def generators(*seeds):
+        return [torch.Generator().manual_seed(seed) for seed in seeds]
+
+    pair = sampler(CAPTIONS[:2], torch.tensor([64, 40]), generator=generators(11, 12))
+    alone = sampler(CAPTIONS[1:2], torch.tensor([40]), generator=generators(12))
+    torch.testing.assert_close(pair.tokens[1:, :, :, :10], alone.tokens)
+    with pytest.raises(ValueError, match="got 1 generators for 2 samples"):
+        sampler(CAPTIONS[:2], torch.tensor([64, 40]), generator=generators(11))
