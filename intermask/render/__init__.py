@@ -6,7 +6,7 @@ Inputs are joint positions ``(T, P, 22, 3)`` in metres on the SMPL 22-joint skel
 Modules: ``projection`` (joint validation, cameras, perspective projection), ``frames`` (PIL
 frames), ``animation`` (GIF/MP4 files), ``html_viewer`` (one-file offline viewer, its page in
 ``viewer_template.html``), ``bvh`` (BVH writer/parser, forward kinematics of a file) and
-``bvh_export`` (BVH clips from the InterHuman and Inter-X representations).
+``bvh_export`` (BVH clips from the InterHuman, Inter-X and HumanML3D representations).
 """
 
 from intermask.render.animation import (
@@ -20,6 +20,8 @@ from intermask.render.animation import (
 from intermask.render.bvh import BvhClip, bvh_joint_positions, read_bvh, write_bvh
 from intermask.render.bvh_export import (
     estimate_offsets,
+    humanml3d_bvh_clips,
+    humanml3d_offsets,
     interhuman_bvh_clips,
     interx_bvh_clips,
     read_bvh_joints,
@@ -39,6 +41,8 @@ __all__ = [
     "ViewerSample",
     "bvh_joint_positions",
     "estimate_offsets",
+    "humanml3d_bvh_clips",
+    "humanml3d_offsets",
     "interhuman_bvh_clips",
     "interx_bvh_clips",
     "person_color",
