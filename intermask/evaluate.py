@@ -238,7 +238,10 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     datamodule.setup("test" if cfg.split == "test" else "validate")
     from intermask.evaluator import load_evaluator
 
-    evaluator = load_evaluator(cfg.eval_ckpt).to(device)
+    released = cfg.get("released_evaluator") or {}
+    evaluator = load_evaluator(
+        cfg.eval_ckpt, glove_dir=released.get("glove_dir"), meta_dir=released.get("meta_dir")
+    ).to(device)
     sources, checkpoints = build_sources(cfg, datamodule.normalizer, device)
 
     def loader(epoch: int) -> Iterator[dict[str, Any]]:
