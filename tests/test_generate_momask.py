@@ -16,54 +16,18 @@ from intermask.cli import main
 from intermask.momask.load import load_momask_sampler
 from intermask.motion import humanml3d as hml
 from intermask.utils.fingerprint import weights_digest
-from tests.momask.momask_tiny import CODES, LAYERS, TINY, make_mask_net, make_residual_net
+from tests.momask.momask_tiny import (
+    CODES,
+    LAYERS,
+    TEXT,
+    TINY,
+    VQ_NET,
+    make_mask_net,
+    make_residual_net,
+    save_run,
+)
 
-TEXT = {  # configs/text/tiny_random.yaml without the disk cache
-    "_target_": "intermask.text.cache.TextFeatureCache",
-    "encoder": {
-        "_target_": "intermask.text.clip_encoder.FrozenCLIPTextEncoder",
-        "model_name": "intermask-tiny-text",
-        "pretrained": None,
-        "context_length": 77,
-        "quick_gelu": None,
-        "seed": 0,
-    },
-    "cache_dir": None,
-}
-VQ_NET = {  # configs/model/vq/humanml3d.yaml at test size
-    "_target_": "intermask.vq.model.MotionVQVAE",
-    "view": {"_target_": "intermask.vq.views.HumanML3DView"},
-    "encoder": {
-        "_target_": "intermask.vq.convolutions.MotionEncoder",
-        "num_joints": 1,
-        "in_channels": hml.FEATURE_DIM,
-        "width": 16,
-        "layout": "1d",
-    },
-    "quantizer": {
-        "_target_": "intermask.vq.quantizers.ResidualQuantizer",
-        "num_quantizers": LAYERS,
-        "codebook_size": CODES,
-        "dim": 16,
-    },
-    "decoder": {
-        "_target_": "intermask.vq.convolutions.MotionDecoder",
-        "num_joints": 1,
-        "out_channels": hml.FEATURE_DIM,
-        "width": 16,
-        "layout": "1d",
-    },
-}
 CAPTION = "a person walks forward"
-
-
-def _save_run(run: Path, config: dict, state: dict[str, torch.Tensor], **hyper: object) -> Path:
-    """A run folder as training leaves it: config.yaml and checkpoints/last.ckpt."""
-    (run / "checkpoints").mkdir(parents=True)
-    (run / "config.yaml").write_text(yaml.safe_dump(config))
-    payload = {"state_dict": {f"net.{k}": v for k, v in state.items()}, "hyper_parameters": hyper}
-    torch.save(payload, run / "checkpoints" / "last.ckpt")
-    return run
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +43,7 @@ def runs(tmp_path_factory) -> dict[str, Path]:
     vq.view.set_statistics(mean, std)
     vq.train()(torch.randn(4, 64, hml.FEATURE_DIM))  # initialise the codebooks from data
     vq.eval()
-    vq_run = _save_run(root / "vq", {"model": {"net": VQ_NET}}, vq.state_dict())
+    vq_run = save_run(root / "vq", {"model": {"net": VQ_NET}}, vq.state_dict())
     vq_ckpt = str(vq_run / "checkpoints" / "last.ckpt")
     hyper = {"codebook_size": CODES, "text_dim": 64, "vq_digest": weights_digest(vq)}
 
@@ -94,13 +58,13 @@ def runs(tmp_path_factory) -> dict[str, Path]:
             },
         }
 
-    mask = _save_run(
+    mask = save_run(
         root / "mask",
         config("MaskTransformerModule", "MaskedTransformer"),
         make_mask_net().state_dict(),
         **hyper,
     )
-    residual = _save_run(
+    residual = save_run(
         root / "residual",
         config("ResidualTransformerModule", "ResidualTransformer"),
         make_residual_net().state_dict(),

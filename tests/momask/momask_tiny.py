@@ -3,7 +3,10 @@ batches."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import torch
+import yaml
 
 from intermask.momask.model import MaskedTransformer, ResidualTransformer
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
@@ -56,3 +59,50 @@ def make_batch(lengths=(64, 40, 30, 16), seed: int = 3) -> dict:
         "length": torch.tensor(lengths),
         "caption": CAPTIONS[: len(lengths)],
     }
+
+
+TEXT = {  # configs/text/tiny_random.yaml without the disk cache
+    "_target_": "intermask.text.cache.TextFeatureCache",
+    "encoder": {
+        "_target_": "intermask.text.clip_encoder.FrozenCLIPTextEncoder",
+        "model_name": "intermask-tiny-text",
+        "pretrained": None,
+        "context_length": 77,
+        "quick_gelu": None,
+        "seed": 0,
+    },
+    "cache_dir": None,
+}
+VQ_NET = {  # configs/model/vq/humanml3d.yaml at test size
+    "_target_": "intermask.vq.model.MotionVQVAE",
+    "view": {"_target_": "intermask.vq.views.HumanML3DView"},
+    "encoder": {
+        "_target_": "intermask.vq.convolutions.MotionEncoder",
+        "num_joints": 1,
+        "in_channels": FEATURES,
+        "width": 16,
+        "layout": "1d",
+    },
+    "quantizer": {
+        "_target_": "intermask.vq.quantizers.ResidualQuantizer",
+        "num_quantizers": LAYERS,
+        "codebook_size": CODES,
+        "dim": 16,
+    },
+    "decoder": {
+        "_target_": "intermask.vq.convolutions.MotionDecoder",
+        "num_joints": 1,
+        "out_channels": FEATURES,
+        "width": 16,
+        "layout": "1d",
+    },
+}
+
+
+def save_run(run: Path, config: dict, state: dict[str, torch.Tensor], **hyper: object) -> Path:
+    """A run folder as training leaves it: config.yaml and checkpoints/last.ckpt."""
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump(config))
+    payload = {"state_dict": {f"net.{k}": v for k, v in state.items()}, "hyper_parameters": hyper}
+    torch.save(payload, run / "checkpoints" / "last.ckpt")
+    return run

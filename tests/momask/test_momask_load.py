@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 import torch
-from omegaconf import OmegaConf
 
 from intermask.momask.load import load_momask, load_momask_sampler
 from intermask.utils.fingerprint import weights_digest
@@ -15,62 +14,19 @@ from tests.momask.momask_tiny import (
     CODES,
     FEATURES,
     LAYERS,
+    TEXT,
     TINY,
+    VQ_NET,
     make_mask_net,
     make_residual_net,
     make_vq,
+    save_run,
 )
-
-TEXT = {
-    "_target_": "intermask.text.cache.TextFeatureCache",
-    "encoder": {
-        "_target_": "intermask.text.clip_encoder.FrozenCLIPTextEncoder",
-        "model_name": "intermask-tiny-text",
-        "pretrained": None,
-        "seed": 0,
-    },
-    "cache_dir": None,
-}
-
-
-def _save_run(
-    folder: Path, config: dict, state: dict, hyper_parameters: dict | None = None
-) -> Path:
-    (folder / "checkpoints").mkdir(parents=True)
-    OmegaConf.save(OmegaConf.create(config), folder / "config.yaml")
-    checkpoint = {"state_dict": state, "hyper_parameters": hyper_parameters or {}}
-    torch.save(checkpoint, folder / "checkpoints" / "last.ckpt")
-    return folder
 
 
 def _vq_run(folder: Path):
     vq = make_vq()
-    net = {
-        "_target_": "intermask.vq.model.MotionVQVAE",
-        "view": {"_target_": "intermask.vq.views.HumanML3DView"},
-        "encoder": {
-            "_target_": "intermask.vq.convolutions.MotionEncoder",
-            "num_joints": 1,
-            "in_channels": FEATURES,
-            "width": 16,
-            "layout": "1d",
-        },
-        "quantizer": {
-            "_target_": "intermask.vq.quantizers.ResidualQuantizer",
-            "num_quantizers": LAYERS,
-            "codebook_size": CODES,
-            "dim": 16,
-        },
-        "decoder": {
-            "_target_": "intermask.vq.convolutions.MotionDecoder",
-            "num_joints": 1,
-            "out_channels": FEATURES,
-            "width": 16,
-            "layout": "1d",
-        },
-    }
-    state = {f"net.{k}": v for k, v in vq.state_dict().items()}
-    return vq, _save_run(folder, {"model": {"net": net}}, state)
+    return vq, save_run(folder, {"model": {"net": VQ_NET}}, vq.state_dict())
 
 
 def _transformer_run(folder: Path, net, target: str, vq, vq_folder: Path, **hyper) -> Path:
@@ -85,8 +41,7 @@ def _transformer_run(folder: Path, net, target: str, vq, vq_folder: Path, **hype
         "vq_digest": weights_digest(vq),
         **hyper,
     }
-    state = {f"net.{k}": v for k, v in net.state_dict().items()}
-    return _save_run(folder, config, state, hyper_parameters)
+    return save_run(folder, config, net.state_dict(), **hyper_parameters)
 
 
 @pytest.fixture
@@ -140,7 +95,10 @@ def test_wrong_runs_and_tokenizers_are_refused(runs, tmp_path):
     for parameter in other.parameters():
         parameter.data.add_(0.5)
     torch.save(
-        {"state_dict": {f"net.{k}": v for k, v in other.state_dict().items()}},
+        {
+            "state_dict": {f"net.{k}": v for k, v in other.state_dict().items()},
+            "hyper_parameters": {},
+        },
         other_folder / "checkpoints" / "last.ckpt",
     )
     with pytest.raises(ValueError, match="not the VQ-VAE .* was trained on"):
