@@ -31,7 +31,7 @@ from intermask.interm.sampler import (
     InteractionSampler,
     joints_from_features,
 )
-from intermask.interm.token_cache import TokenCache, crop_keys
+from intermask.interm.token_cache import TokenCache, TokenCacheHooks, crop_keys
 from intermask.motion.masks import length_mask
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
@@ -98,7 +98,7 @@ def masked_accuracy(
     return (logits[mask].argmax(dim=-1) == targets[mask]).float().mean()
 
 
-class InterMModule(LossStepsModule):
+class InterMModule(TokenCacheHooks, LossStepsModule):
     """Trains :class:`InterMTransformer` on interaction batches of the DataModule.
 
     Batch: ``motion`` (B, 2, T, *F) normalized features, ``length`` (B,) frames, ``caption``
@@ -278,17 +278,6 @@ class InterMModule(LossStepsModule):
                 f"this run's vq_ckpt has {self.hparams.vq_digest[:16]}: resume with the "
                 "tokenizer the checkpoint's run used"
             )
-
-    def on_train_epoch_start(self) -> None:
-        if self.token_cache is not None:
-            self.token_cache.bind(self.vq, recheck=True)  # weights changed in place: start over
-            self.token_cache.reset_counts()
-
-    def on_train_epoch_end(self) -> None:
-        cache = self.token_cache
-        if cache is not None and cache.lookups:  # this epoch's training and validation crops
-            self.log("token_cache/hit_rate", cache.hit_rate)
-            self.log("token_cache/crops", float(len(cache)))
 
     def sampler(self, **settings: Any) -> InteractionSampler:
         """An :class:`InteractionSampler` over this module's network, VQ-VAE and text cache;

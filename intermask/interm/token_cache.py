@@ -114,3 +114,22 @@ class TokenCache:
 
     def __len__(self) -> int:
         return len(self.entries)
+
+
+class TokenCacheHooks:
+    """Training-epoch hooks of a LightningModule with a ``token_cache`` (or None) and a frozen
+    ``vq``: re-bind the cache at each epoch's start (the tokenizer's weights may have changed in
+    place: it then starts over) and log its hit rate and size at the end."""
+
+    token_cache: TokenCache | None
+
+    def on_train_epoch_start(self) -> None:
+        if self.token_cache is not None:
+            self.token_cache.bind(self.vq, recheck=True)  # weights changed in place: start over
+            self.token_cache.reset_counts()
+
+    def on_train_epoch_end(self) -> None:
+        cache = self.token_cache
+        if cache is not None and cache.lookups:  # this epoch's training and validation crops
+            self.log("token_cache/hit_rate", cache.hit_rate)
+            self.log("token_cache/crops", float(len(cache)))

@@ -19,7 +19,7 @@ import torch
 from torch import nn
 from torch.optim import Optimizer
 
-from intermask.interm.token_cache import TokenCache
+from intermask.interm.token_cache import TokenCache, TokenCacheHooks
 from intermask.momask.model import sentence_features
 from intermask.text.cache import TextFeatureCache
 from intermask.utils.fingerprint import weights_digest
@@ -50,7 +50,7 @@ def check_probability(name: str, value: float) -> None:
         raise ValueError(f"{name} must lie in [0, 1], got {value}")
 
 
-class MoMaskModuleBase(LossStepsModule):
+class MoMaskModuleBase(TokenCacheHooks, LossStepsModule):
     """The part both transformers share: frozen tokenizer and text, tokens, text features.
 
     Subclasses build their network from a factory (:meth:`_build_net`), check a tokenizer
@@ -171,17 +171,6 @@ class MoMaskModuleBase(LossStepsModule):
                 f"this module's tokenizer has {current[:16]}: resume with the tokenizer the "
                 "checkpoint's run used"
             )
-
-    def on_train_epoch_start(self) -> None:
-        if self.token_cache is not None:
-            self.token_cache.bind(self.vq, recheck=True)  # weights changed in place: start over
-            self.token_cache.reset_counts()
-
-    def on_train_epoch_end(self) -> None:
-        cache = self.token_cache
-        if cache is not None and cache.lookups:
-            self.log("token_cache/hit_rate", cache.hit_rate)
-            self.log("token_cache/crops", float(len(cache)))
 
     def tokenize(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
         """Batch -> (B, Q, T') codes of every layer (-1 beyond each length) and (B,) lengths in
