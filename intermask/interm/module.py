@@ -31,7 +31,7 @@ from intermask.interm.sampler import (
     InteractionSampler,
     joints_from_features,
 )
-from intermask.interm.token_cache import TokenCache, TokenCacheHooks, crop_keys
+from intermask.interm.token_cache import FrozenTokenizerHooks, TokenCache, crop_keys
 from intermask.motion.masks import length_mask
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
@@ -98,7 +98,7 @@ def masked_accuracy(
     return (logits[mask].argmax(dim=-1) == targets[mask]).float().mean()
 
 
-class InterMModule(TokenCacheHooks, LossStepsModule):
+class InterMModule(FrozenTokenizerHooks, LossStepsModule):
     """Trains :class:`InterMTransformer` on interaction batches of the DataModule.
 
     Batch: ``motion`` (B, 2, T, *F) normalized features, ``length`` (B,) frames, ``caption``
@@ -215,12 +215,6 @@ class InterMModule(TokenCacheHooks, LossStepsModule):
     def text(self) -> TextFeatureCache:
         return self._frozen.text
 
-    def _move_frozen(self, device: torch.device) -> None:
-        if next(self.vq.parameters()).device != device:
-            self.vq.to(device)
-        if self.text.encoder.device != device:
-            self.text.encoder.to(device)
-
     def tokenize(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
         """Batch -> (B, 2, rows, T') base-layer tokens (-1 on padding) and (B,) lengths in steps.
 
@@ -268,16 +262,6 @@ class InterMModule(TokenCacheHooks, LossStepsModule):
                     cache.put(keys[2 * sample + person], fresh[row, person])
         tokens = rearrange(torch.stack(codes), "(b p) r t -> b p r t", p=2)
         return tokens.to(motion.device)
-
-    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
-        """Resuming with another tokenizer would train on codes that mean other motions."""
-        stored = checkpoint.get("hyper_parameters", {}).get("vq_digest")
-        if stored is not None and stored != self.hparams.vq_digest:
-            raise ValueError(
-                f"the checkpoint was trained on the VQ-VAE with weights digest {stored[:16]}; "
-                f"this run's vq_ckpt has {self.hparams.vq_digest[:16]}: resume with the "
-                "tokenizer the checkpoint's run used"
-            )
 
     def sampler(self, **settings: Any) -> InteractionSampler:
         """An :class:`InteractionSampler` over this module's network, VQ-VAE and text cache;

@@ -116,12 +116,31 @@ class TokenCache:
         return len(self.entries)
 
 
-class TokenCacheHooks:
-    """Training-epoch hooks of a LightningModule with a ``token_cache`` (or None) and a frozen
-    ``vq``: re-bind the cache at each epoch's start (the tokenizer's weights may have changed in
-    place: it then starts over) and log its hit rate and size at the end."""
+class FrozenTokenizerHooks:
+    """What a LightningModule training on a frozen tokenizer needs, owned once: ``vq`` and
+    ``text`` (its properties) follow the module's device, a checkpoint trained on another
+    tokenizer is refused on resume, and the ``token_cache`` (or None) is re-bound at each
+    training epoch's start (the tokenizer's weights may have changed in place: it then starts
+    over) and reports its hit rate and size at the end."""
 
     token_cache: TokenCache | None
+
+    def _move_frozen(self, device: torch.device) -> None:
+        if next(self.vq.parameters()).device != device:
+            self.vq.to(device)
+        if self.text.encoder.device != device:
+            self.text.encoder.to(device)
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        """Resuming with another tokenizer would train on codes that mean other motions."""
+        stored = checkpoint.get("hyper_parameters", {}).get("vq_digest")
+        current = self.hparams.get("vq_digest")
+        if stored is not None and current is not None and stored != current:
+            raise ValueError(
+                f"the checkpoint was trained on the VQ-VAE with weights digest {stored[:16]}; "
+                f"this module's tokenizer has {current[:16]}: resume with the tokenizer the "
+                "checkpoint's run used"
+            )
 
     def on_train_epoch_start(self) -> None:
         if self.token_cache is not None:

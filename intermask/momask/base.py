@@ -19,7 +19,7 @@ import torch
 from torch import nn
 from torch.optim import Optimizer
 
-from intermask.interm.token_cache import TokenCache, TokenCacheHooks
+from intermask.interm.token_cache import FrozenTokenizerHooks, TokenCache
 from intermask.momask.model import sentence_features
 from intermask.text.cache import TextFeatureCache
 from intermask.utils.fingerprint import weights_digest
@@ -50,7 +50,7 @@ def check_probability(name: str, value: float) -> None:
         raise ValueError(f"{name} must lie in [0, 1], got {value}")
 
 
-class MoMaskModuleBase(TokenCacheHooks, LossStepsModule):
+class MoMaskModuleBase(FrozenTokenizerHooks, LossStepsModule):
     """The part both transformers share: frozen tokenizer and text, tokens, text features.
 
     Subclasses build their network from a factory (:meth:`_build_net`), check a tokenizer
@@ -154,23 +154,6 @@ class MoMaskModuleBase(TokenCacheHooks, LossStepsModule):
     @property
     def text(self) -> TextFeatureCache:
         return self._frozen.text
-
-    def _move_frozen(self, device: torch.device) -> None:
-        if next(self.vq.parameters()).device != device:
-            self.vq.to(device)
-        if self.text.encoder.device != device:
-            self.text.encoder.to(device)
-
-    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
-        """Resuming with another tokenizer would train on codes that mean other motions."""
-        stored = checkpoint.get("hyper_parameters", {}).get("vq_digest")
-        current = self.hparams.get("vq_digest")
-        if stored is not None and current is not None and stored != current:
-            raise ValueError(
-                f"the checkpoint was trained on the VQ-VAE with weights digest {stored[:16]}; "
-                f"this module's tokenizer has {current[:16]}: resume with the tokenizer the "
-                "checkpoint's run used"
-            )
 
     def tokenize(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
         """Batch -> (B, Q, T') codes of every layer (-1 beyond each length) and (B,) lengths in
