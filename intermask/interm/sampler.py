@@ -57,6 +57,21 @@ def joints_from_features(vq: MotionVQVAE, features: torch.Tensor) -> torch.Tenso
     return rearrange(positions, "(b p) t j c -> b t p j c", p=2)
 
 
+def checked_steps(
+    captions: Sequence[str] | None, lengths: torch.Tensor | Sequence[int], device: torch.device
+) -> torch.Tensor:
+    """(B,) frames -> (B,) token steps on ``device`` (rounded down), checked: at least one step
+    each, and one caption per length when there are captions."""
+    lengths = torch.as_tensor(lengths, device=device).long()
+    if lengths.ndim != 1 or bool((lengths < FRAMES_PER_STEP).any()):
+        raise ValueError(
+            f"lengths must be (B,) frames >= {FRAMES_PER_STEP}, got {lengths.tolist()}"
+        )
+    if captions is not None and len(captions) != lengths.shape[0]:
+        raise ValueError(f"got {len(captions)} captions for {lengths.shape[0]} lengths")
+    return lengths // FRAMES_PER_STEP
+
+
 class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
@@ -115,14 +130,7 @@ class InteractionSampler:
         seeds: (B,) one per sample (reproducible and independent of the batch).
         reference_tokens / edit: reaction (person A fixed) and inpainting, see :func:`generate`.
         """
-        lengths = torch.as_tensor(lengths, device=self.device).long()
-        if lengths.ndim != 1 or bool((lengths < FRAMES_PER_STEP).any()):
-            raise ValueError(
-                f"lengths must be (B,) frames >= {FRAMES_PER_STEP}, got {lengths.tolist()}"
-            )
-        if captions is not None and len(captions) != lengths.shape[0]:
-            raise ValueError(f"got {len(captions)} captions for {lengths.shape[0]} lengths")
-        steps = lengths // FRAMES_PER_STEP
+        steps = checked_steps(captions, lengths, self.device)
         text = None if captions is None else self.text_features(captions)
         tokens = generate(
             self.net,

@@ -37,6 +37,7 @@ from torch import nn
 
 from intermask.interm.decoding import sample_codes, top_k_filter
 from intermask.interm.masking import cosine_schedule, lowest_ranks, scheduled_count
+from intermask.interm.sampler import checked_steps
 from intermask.interm.tokens import step_padding_mask
 from intermask.momask.model import MaskedTransformer, ResidualTransformer, sentence_features
 from intermask.text.cache import TextFeatureCache
@@ -320,14 +321,7 @@ class MoMaskSampler:
         longest length // 4; lengths are rounded down to a multiple of 4 (at least 4).
         ``generator``: one for the batch, or one per sample (then a sample's codes depend on its
         own generator only)."""
-        lengths = torch.as_tensor(lengths, device=self.device).long()
-        if lengths.ndim != 1 or bool((lengths < FRAMES_PER_STEP).any()):
-            raise ValueError(
-                f"lengths must be (B,) frames >= {FRAMES_PER_STEP}, got {lengths.tolist()}"
-            )
-        if captions is not None and len(captions) != lengths.shape[0]:
-            raise ValueError(f"got {len(captions)} captions for {lengths.shape[0]} lengths")
-        steps = lengths // FRAMES_PER_STEP
+        steps = checked_steps(captions, lengths, self.device)
         text = None if captions is None else self.sentence(captions)
         base = decode_base(
             self.mask_net,
