@@ -10,26 +10,19 @@ from collections.abc import Callable
 import torch
 
 from intermask.evaluation.protocol import Batch, MotionSource
-from intermask.metrics.mpjpe import MPJPE
+from intermask.evaluation.sources import VQReconstruction, token_lengths
 from intermask.motion.masks import length_mask
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
-
-
-def step_lengths(batch: Batch, frames: int) -> torch.Tensor:
-    """(B,) item lengths rounded down to whole token steps (4 frames), within ``frames``."""
-    lengths = batch["length"].long().clamp(max=frames)
-    return (lengths - lengths % FRAMES_PER_STEP).clamp_min(FRAMES_PER_STEP)
 
 
 def _usable_frames(motion: torch.Tensor) -> int:
     return motion.shape[1] - motion.shape[1] % FRAMES_PER_STEP
 
 
-class SoloReconstruction(MotionSource):
+class SoloReconstruction(VQReconstruction):
     """The items through the tokenizer (encode -> nearest codes of every layer, or of the first
-    ``layers`` -> decode), with MPJPE (mm) of the recovered joints against the GT's."""
-
-    generates = False
+    ``layers`` -> decode), with MPJPE (mm) of the recovered joints against the GT's (the
+    two-person row's metric, reset and device)."""
 
     def __init__(
         self, *, vq: MotionVQVAE, layers: int | None = None, name: str = "RVQ reconstruction"
@@ -39,21 +32,14 @@ class SoloReconstruction(MotionSource):
             raise ValueError(
                 f"layers must be in [1, {quantizers}] for this tokenizer, got {layers}"
             )
-        self.vq, self.layers, self.name = vq, layers, name
-        self.mpjpe = MPJPE()
-
-    @property
-    def device(self) -> torch.device:
-        return next(self.vq.parameters()).device
-
-    def reset(self) -> None:
-        self.mpjpe.reset()
+        super().__init__(vq=vq, name=name)
+        self.layers = layers
 
     @torch.no_grad()
     def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         motion = batch["motion"].to(self.device).float()
         frames = _usable_frames(motion)
-        lengths = step_lengths(batch, frames).to(motion.device)
+        lengths = token_lengths(batch, frames).to(motion.device)
         real = motion[:, :frames]
         indices = self.vq.encode(real, lengths)
         if self.layers is not None:
@@ -64,11 +50,6 @@ class SoloReconstruction(MotionSource):
         if predicted.positions is not None and target.positions is not None:
             self.mpjpe.update(predicted.positions, target.positions, mask)
         return self.vq.view.denormalize(decoded), lengths
-
-    def extra_metrics(self) -> dict[str, float]:
-        if int(self.mpjpe.count) == 0:
-            return {}
-        return {"mpjpe_mm": float(self.mpjpe.compute())}
 
 
 class TextToMotion(MotionSource):
@@ -87,5 +68,5 @@ class TextToMotion(MotionSource):
 
     @torch.no_grad()
     def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        lengths = step_lengths(batch, _usable_frames(batch["motion"]))
+        lengths = token_lengths(batch, _usable_frames(batch["motion"]))
         return self.generate(list(batch["caption"]), lengths, seeds), lengths

@@ -7,7 +7,8 @@ import torch
 from omegaconf import OmegaConf
 
 from intermask.evaluate import build_sources
-from intermask.evaluation.text_motion import SoloReconstruction, TextToMotion, step_lengths
+from intermask.evaluation.sources import token_lengths
+from intermask.evaluation.text_motion import SoloReconstruction, TextToMotion
 from intermask.metrics.mpjpe import per_joint_errors
 from intermask.motion.masks import length_mask
 from tests.momask.momask_tiny import LAYERS, make_batch, make_vq
@@ -15,7 +16,7 @@ from tests.momask.momask_tiny import LAYERS, make_batch, make_vq
 
 def test_step_lengths_round_down_to_whole_tokens_within_the_frames():
     batch = {"length": torch.tensor([63, 40, 3, 200])}
-    assert step_lengths(batch, 196).tolist() == [60, 40, 4, 196]
+    assert token_lengths(batch, 196).tolist() == [60, 40, 4, 196]
 
 
 def test_reconstruction_row_decodes_the_items_codes_and_measures_mpjpe():
