@@ -3,6 +3,9 @@ evaluation compose holds the library's defaults."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 from hydra import compose, initialize_config_dir
 
 from intermask import generate
@@ -35,5 +38,22 @@ def test_generate_and_eval_compose_the_library_defaults():
         paper = compose("eval", overrides=["eval_ckpt=x.ckpt"])
         demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
     assert dict(paper.sampler) == LIBRARY
-    # the demo's changes: persons in turn, 5 iterations each (the passes of 10 together)
-    assert dict(demo.sampler) == {**LIBRARY, "iterations": 5, "persons": "in_turn"}
+    # the demo's changes: persons in turn, 5 iterations each (the passes of 10 together), and
+    # a weaker guidance (docs/learning.md, ninth pass)
+    assert dict(demo.sampler) == {
+        **LIBRARY, "iterations": 5, "persons": "in_turn", "cfg_scale": 1.5
+    }
+
+
+def test_demo_samples_are_decoded_as_the_demo_table():
+    """`make demo` draws its samples with the decoding its table was measured with."""
+    makefile = (Path(__file__).resolve().parents[1] / "Makefile").read_text()
+    line = re.search(r"^DEMO_DECODING := (.*)$", makefile, re.MULTILINE)
+    assert line is not None, "Makefile: DEMO_DECODING is gone"
+    flags = dict(re.findall(r"--([a-z-]+) (\S+)", line.group(1)))
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
+    assert int(flags["iterations"]) == demo.sampler.iterations
+    assert float(flags["cfg-scale"]) == demo.sampler.cfg_scale
+    assert flags["persons"] == demo.sampler.persons
+    assert float(flags["seconds"]) * 30 == demo.data.max_length  # 30 fps crops
