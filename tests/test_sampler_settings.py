@@ -41,7 +41,10 @@ def test_generate_and_eval_compose_the_library_defaults():
     # the demo's changes: persons in turn, 5 iterations each (the passes of 10 together), and
     # a weaker guidance (docs/learning.md, ninth pass)
     assert dict(demo.sampler) == {
-        **LIBRARY, "iterations": 5, "persons": "in_turn", "cfg_scale": 1.5
+        **LIBRARY,
+        "iterations": 5,
+        "persons": "in_turn",
+        "cfg_scale": 1.5,
     }
 
 
