@@ -45,7 +45,8 @@ def test_training_reduces_the_loss_on_a_fixed_batch(build, text_cache, optimizer
     module = build(text_cache, optimizer)
     batch = make_batch()
     step = torch.optim.AdamW(module.parameters(), lr=3e-3)
-    start, losses = time.perf_counter(), []
+    # process CPU time, not wall time: a loaded machine stretches the wall clock, not the work
+    start, losses = time.process_time(), []
     for _ in range(20):
         generator = torch.Generator().manual_seed(0)  # the same masks, layers and drops each step
         loss = module.compute_losses(batch, condition_drop=0.1, generator=generator).total
@@ -54,7 +55,7 @@ def test_training_reduces_the_loss_on_a_fixed_batch(build, text_cache, optimizer
         step.step()
         losses.append(loss.item())
     assert losses[-1] < 0.7 * losses[0]
-    assert time.perf_counter() - start < 5.0
+    assert time.process_time() - start < 10.0  # all threads together; a fast test, not `slow`
 
 
 @pytest.mark.parametrize("build", [_mask_module, _residual_module])
