@@ -8,7 +8,10 @@ Stage 1 (eq. 3): with probability ``p_r`` random masking of both persons with ra
 ``gamma(tau) = cos(pi * tau / 2)``, ``tau ~ U(0, 1)``; otherwise interaction masking (every
 token of one person). This framework adds solo masking, off by default (``p_solo``): one person
 wholly masked, the other randomly masked as in eq. 3, which is what decoding the persons in turn
-asks of the model (person A is decoded while B is all [MASK]). The masked positions are then
+asks of the model (person A is decoded while B is all [MASK]); and partner masking, off by
+default (``p_partner``): one person wholly visible, the other masked on the schedule, the state of
+every later iteration of B's turn and of reaction generation (interaction masking only shows its
+first iteration, B all [MASK]). The masked positions are then
 corrupted BERT-style. Stage 2 (step
 unroll, after Kim et al. 2023b): the least confident of the stage-1 predictions are re-masked
 with the ratio of the next step and predicted again.
@@ -178,6 +181,23 @@ def solo_masking(
     return scheduled_mask(valid & ~hidden, tau, generator) | (valid & hidden)
 
 
+def partner_masking(
+    tokens_a: torch.Tensor,
+    tokens_b: torch.Tensor,
+    lengths_in_steps: torch.Tensor,
+    *,
+    tau: torch.Tensor,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """Partner masking -> (B, 2, rows, T') bool mask: one person, chosen uniformly per sample,
+    is masked on the schedule (``ceil(gamma(tau) * n)`` of its ``n`` valid tokens, at least one)
+    while the other, its partner, stays wholly visible. Interaction masking is its ``tau = 0``."""
+    tokens = stack_persons(tokens_a, tokens_b)
+    valid = valid_tokens(tokens, lengths_in_steps)
+    masked = _one_person(tokens.shape[0], tokens, generator)
+    return scheduled_mask(valid & masked, tau, generator)
+
+
 def training_mask(
     tokens_a: torch.Tensor,
     tokens_b: torch.Tensor,
@@ -185,19 +205,22 @@ def training_mask(
     *,
     p_random: float = P_RANDOM,
     p_solo: float = 0.0,
+    p_partner: float = 0.0,
     generator: torch.Generator | None = None,
 ) -> TrainingMask:
     """Stage-1 mask: per sample random masking with probability ``p_random`` (p_r = 0.8 in the
     paper), otherwise interaction masking, or solo masking for a ``p_solo`` share of those
-    samples (0, the paper, draws nothing for it: the random stream is the paper setting's).
+    samples, and partner masking for a ``p_partner`` share of the samples left to interaction
+    masking (each 0 in the paper and drawing nothing then: the random stream is the paper
+    setting's).
 
     ``tau`` is the sampled progress for random masking and ``gamma^-1(0.5) = 2/3`` for
-    interaction masking (half of the valid tokens are hidden); for solo masking, the progress
-    whose ratio is the share of valid tokens it hides. The reference draws one
+    interaction masking (half of the valid tokens are hidden); for solo and partner masking, the
+    progress whose ratio is the share of valid tokens it hides. The reference draws one
     interaction/random decision per batch and masks person A in one half of the batch and
     person B in the other; we decide per sample.
     """
-    for name, prob in (("p_random", p_random), ("p_solo", p_solo)):
+    for name, prob in (("p_random", p_random), ("p_solo", p_solo), ("p_partner", p_partner)):
         if not 0.0 <= prob <= 1.0:
             raise ValueError(f"{name} must lie in [0, 1], got {prob}")
     batch = tokens_a.shape[0]
@@ -207,14 +230,24 @@ def training_mask(
     interaction = interaction_masking(tokens_a, tokens_b, lengths_in_steps, generator=generator)
     mask = torch.where(is_random[:, None, None, None], random, interaction)
     tau = torch.where(is_random, tau, torch.full_like(tau, INTERACTION_TAU))
+    is_solo = torch.zeros_like(is_random)
     if p_solo > 0:
         is_solo = ~is_random & (_rand((batch,), tokens_a, generator) < p_solo)
         solo_tau = _rand((batch,), tokens_a, generator).double()
         solo = solo_masking(tokens_a, tokens_b, lengths_in_steps, tau=solo_tau, generator=generator)
         mask = torch.where(is_solo[:, None, None, None], solo, mask)
+    is_partner = torch.zeros_like(is_random)
+    if p_partner > 0:
+        is_partner = ~is_random & ~is_solo & (_rand((batch,), tokens_a, generator) < p_partner)
+        partner_tau = _rand((batch,), tokens_a, generator).double()
+        partner = partner_masking(
+            tokens_a, tokens_b, lengths_in_steps, tau=partner_tau, generator=generator
+        )
+        mask = torch.where(is_partner[:, None, None, None], partner, mask)
+    if p_solo > 0 or p_partner > 0:
         valid = valid_tokens(stack_persons(tokens_a, tokens_b), lengths_in_steps)
-        share = solo.flatten(1).sum(1).double() / valid.flatten(1).sum(1).clamp(min=1).double()
-        tau = torch.where(is_solo, inverse_cosine_schedule(share), tau)
+        share = mask.flatten(1).sum(1).double() / valid.flatten(1).sum(1).clamp(min=1).double()
+        tau = torch.where(is_solo | is_partner, inverse_cosine_schedule(share), tau)
     return TrainingMask(mask, tau, is_random)
 
 

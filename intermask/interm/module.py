@@ -115,6 +115,8 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         p_random: p_r, random- vs interaction-masking probability (section 3.2.1, 0.8).
         p_solo: share of the samples not randomly masked that get solo masking instead of
             interaction masking (:mod:`intermask.interm.masking`; 0, the paper).
+        p_partner: share of the samples left to interaction masking that get partner masking
+            instead: the hidden person masked on the schedule, not wholly (0, the paper).
         condition_drop: per-sample probability of the null condition (classifier-free
             guidance, 0.1).
         step_unroll: add the second, step-unroll pass (section 3.2.1 stage 2).
@@ -143,6 +145,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         warmup_fraction: float,
         p_random: float = P_RANDOM,
         p_solo: float = 0.0,
+        p_partner: float = 0.0,
         condition_drop: float = 0.1,
         step_unroll: bool = True,
         lr_milestones: Sequence[float] = (0.5, 0.7, 0.85),
@@ -169,6 +172,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         for name, prob in (
             ("p_random", p_random),
             ("p_solo", p_solo),
+            ("p_partner", p_partner),
             ("condition_drop", condition_drop),
         ):
             if not 0.0 <= prob <= 1.0:
@@ -191,6 +195,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
             {
                 "p_random": float(p_random),
                 "p_solo": float(p_solo),
+                "p_partner": float(p_partner),
                 "condition_drop": float(condition_drop),
                 "step_unroll": bool(step_unroll),
                 "warmup_fraction": float(warmup_fraction),
@@ -305,6 +310,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
             every_length,
             p_random=self.hparams.p_random,
             p_solo=self.hparams.get("p_solo", 0.0),  # checkpoints from before the switch: 0
+            p_partner=self.hparams.get("p_partner", 0.0),
             generator=generator,
         )
         corrupted = bert_corruption(layout, masking.mask, vocabulary, generator=generator).tokens

@@ -19,6 +19,7 @@ PAPER = {
     "use_cross_attention": True,
     "p_random": 0.8,
     "p_solo": 0.0,
+    "p_partner": 0.0,
     "step_unroll": True,
 }
 EXPERIMENTS = {

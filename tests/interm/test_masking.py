@@ -9,6 +9,7 @@ from intermask.interm.masking import (
     cosine_schedule,
     interaction_masking,
     inverse_cosine_schedule,
+    partner_masking,
     random_masking,
     solo_masking,
     step_unroll_mask,
@@ -155,6 +156,74 @@ def test_training_mask_with_p_solo_mixes_three_kinds_and_keeps_the_paper_stream(
     assert (out.tau[interaction] == INTERACTION_TAU).all()
     with pytest.raises(ValueError, match="p_solo must lie in \\[0, 1\\], got -0.1"):
         training_mask(a, b, lengths, p_solo=-0.1)
+
+
+def test_partner_masking_shows_one_person_whole_and_masks_the_other_on_the_schedule():
+    batch = 400
+    lengths = torch.randint(1, STEPS + 1, (batch,), generator=torch.Generator().manual_seed(1))
+    a, b = _tokens(batch, lengths)
+    tau = torch.rand(batch, generator=torch.Generator().manual_seed(2)).double()
+    mask = partner_masking(a, b, lengths, tau=tau, generator=torch.Generator().manual_seed(3))
+    valid = valid_tokens(torch.stack([a, b], 1), lengths)
+    assert not (mask & ~valid).any()  # padding is never masked
+    per_person = mask.flatten(2).sum(2)  # (B, 2)
+    assert ((per_person == 0).sum(1) == 1).all()  # exactly one person, the partner, is whole
+    masked = (per_person[:, 1] > 0).long()
+    n = valid[torch.arange(batch), masked].flatten(1).sum(1)
+    expected = torch.ceil(cosine_schedule(tau) * n.double() - 1e-9).clamp(min=1)
+    assert torch.equal(per_person.sum(1).double(), expected)
+    assert 0.4 < masked.double().mean() < 0.6  # either person may be the masked one
+    # tau = 0 is interaction masking: the masked person is hidden wholly
+    zero = partner_masking(
+        a, b, lengths, tau=torch.zeros(batch, dtype=torch.float64), generator=torch.Generator()
+    )
+    assert torch.equal(zero.flatten(2).sum(2).max(1).values, valid[:, 0].flatten(1).sum(1))
+
+
+def test_training_mask_with_p_partner_replaces_interaction_masking_and_keeps_the_stream():
+    batch = 2000
+    lengths = torch.full((batch,), STEPS)
+    a, b = _tokens(batch, lengths)
+    without = training_mask(
+        a, b, lengths, p_random=0.5, p_solo=0.5, generator=torch.Generator().manual_seed(5)
+    )
+    same = training_mask(
+        a,
+        b,
+        lengths,
+        p_random=0.5,
+        p_solo=0.5,
+        p_partner=0.0,
+        generator=torch.Generator().manual_seed(5),
+    )
+    assert torch.equal(without.mask, same.mask) and torch.equal(without.tau, same.tau)
+    out = training_mask(
+        a,
+        b,
+        lengths,
+        p_random=0.5,
+        p_solo=0.5,
+        p_partner=1.0,
+        generator=torch.Generator().manual_seed(5),
+    )
+    assert torch.equal(out.is_random, without.is_random)
+    n = ROWS * STEPS
+    per_person = out.mask.flatten(2).sum(2)  # (B, 2)
+    whole = (per_person == n).any(1)
+    partner = ~out.is_random & (per_person == 0).any(1)  # one person wholly visible
+    solo = ~out.is_random & whole & (per_person > 0).all(1)
+    # p_partner 1: no sample is left to interaction masking, and solo samples stay solo
+    interaction = ~out.is_random & whole & (per_person.sum(1) == n)
+    assert not (interaction & ~partner).any()
+    assert torch.equal(solo | partner, ~out.is_random)
+    assert 0.2 < partner.double().mean() < 0.3 and 0.2 < solo.double().mean() < 0.3
+    masked = per_person[partner].sum(1)
+    # partial unless gamma(tau) > 39/40, i.e. tau < 2 / pi * acos(39 / 40) = 0.143
+    assert (masked >= 1).all() and 0.8 < (masked < n).double().mean() < 0.9
+    share = masked.double() / (2 * n)
+    torch.testing.assert_close(out.tau[partner], inverse_cosine_schedule(share))
+    with pytest.raises(ValueError, match="p_partner must lie in \\[0, 1\\], got 1.5"):
+        training_mask(a, b, lengths, p_partner=1.5)
 
 
 def test_bert_corruption_proportions():

@@ -125,22 +125,27 @@ def test_stage1_loss_is_the_cross_entropy_over_the_masked_tokens(encoder, tmp_pa
     assert losses.stage2 == 0
 
 
-def test_p_solo_reaches_the_training_masks(encoder, tmp_path, monkeypatch):
+def test_p_solo_and_p_partner_reach_the_training_masks(encoder, tmp_path, monkeypatch):
     from intermask.interm import module as module_file
 
     seen = []
     original = module_file.training_mask
 
     def recording(*args, **kwargs):
-        seen.append(kwargs["p_solo"])
+        seen.append((kwargs["p_solo"], kwargs["p_partner"]))
         return original(*args, **kwargs)
 
     monkeypatch.setattr(module_file, "training_mask", recording)
-    module = _module(encoder, tmp_path, step_unroll=False, p_random=0.5, p_solo=0.25)
+    module = _module(
+        encoder, tmp_path, step_unroll=False, p_random=0.5, p_solo=0.25, p_partner=0.75
+    )
     module.compute_losses(_batch(), condition_drop=0.0)
-    assert seen == [0.25] and module.hparams.p_solo == 0.25
+    assert seen == [(0.25, 0.75)]
+    assert (module.hparams.p_solo, module.hparams.p_partner) == (0.25, 0.75)
     with pytest.raises(ValueError, match=r"p_solo must lie in \[0, 1\], got 2.0"):
         _module(encoder, tmp_path, p_solo=2.0)
+    with pytest.raises(ValueError, match=r"p_partner must lie in \[0, 1\], got -1.0"):
+        _module(encoder, tmp_path, p_partner=-1.0)
 
 
 def test_masked_cross_entropy_ignores_unmasked_positions():
