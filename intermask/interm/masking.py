@@ -150,6 +150,17 @@ def _one_person(batch: int, like: torch.Tensor, generator: torch.Generator | Non
     return chosen[:, :, None, None]
 
 
+def _valid_and_one_person(
+    tokens_a: torch.Tensor,
+    tokens_b: torch.Tensor,
+    lengths_in_steps: torch.Tensor,
+    generator: torch.Generator | None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(B, 2, rows, T') valid tokens and (B, 2, 1, 1) one person per sample, chosen uniformly."""
+    tokens = stack_persons(tokens_a, tokens_b)
+    return valid_tokens(tokens, lengths_in_steps), _one_person(tokens.shape[0], tokens, generator)
+
+
 def interaction_masking(
     tokens_a: torch.Tensor,
     tokens_b: torch.Tensor,
@@ -159,9 +170,8 @@ def interaction_masking(
 ) -> torch.Tensor:
     """Interaction masking -> (B, 2, rows, T') bool mask: all valid tokens of one person, chosen
     uniformly per sample, are masked; the other person stays fully visible (section 3.2.1)."""
-    tokens = stack_persons(tokens_a, tokens_b)
-    valid = valid_tokens(tokens, lengths_in_steps)
-    return valid & _one_person(tokens.shape[0], tokens, generator)
+    valid, chosen = _valid_and_one_person(tokens_a, tokens_b, lengths_in_steps, generator)
+    return valid & chosen
 
 
 def solo_masking(
@@ -175,9 +185,7 @@ def solo_masking(
     """Solo masking -> (B, 2, rows, T') bool mask: every valid token of one person, chosen
     uniformly per sample, as if that person were still to come; of the other person's ``n``
     valid tokens ``ceil(gamma(tau) * n)``, at least one, chosen uniformly."""
-    tokens = stack_persons(tokens_a, tokens_b)
-    valid = valid_tokens(tokens, lengths_in_steps)
-    hidden = _one_person(tokens.shape[0], tokens, generator)
+    valid, hidden = _valid_and_one_person(tokens_a, tokens_b, lengths_in_steps, generator)
     return scheduled_mask(valid & ~hidden, tau, generator) | (valid & hidden)
 
 
@@ -192,9 +200,7 @@ def partner_masking(
     """Partner masking -> (B, 2, rows, T') bool mask: one person, chosen uniformly per sample,
     is masked on the schedule (``ceil(gamma(tau) * n)`` of its ``n`` valid tokens, at least one)
     while the other, its partner, stays wholly visible. Interaction masking is its ``tau = 0``."""
-    tokens = stack_persons(tokens_a, tokens_b)
-    valid = valid_tokens(tokens, lengths_in_steps)
-    masked = _one_person(tokens.shape[0], tokens, generator)
+    valid, masked = _valid_and_one_person(tokens_a, tokens_b, lengths_in_steps, generator)
     return scheduled_mask(valid & masked, tau, generator)
 
 

@@ -107,14 +107,20 @@ def test_training_mask_mixes_with_p_random_and_reports_tau():
         training_mask(a, b, lengths, p_random=1.5)
 
 
-def test_solo_masking_hides_one_person_and_masks_the_other_on_the_schedule():
-    batch = 400
+def _scheduled_one_person(masking, batch: int = 400):
+    """A one-person masking at random lengths and progress -> (mask, valid, tau, lengths)."""
     lengths = torch.randint(1, STEPS + 1, (batch,), generator=torch.Generator().manual_seed(1))
     a, b = _tokens(batch, lengths)
     tau = torch.rand(batch, generator=torch.Generator().manual_seed(2)).double()
-    mask = solo_masking(a, b, lengths, tau=tau, generator=torch.Generator().manual_seed(3))
+    mask = masking(a, b, lengths, tau=tau, generator=torch.Generator().manual_seed(3))
     valid = valid_tokens(torch.stack([a, b], 1), lengths)
     assert not (mask & ~valid).any()  # padding is never masked
+    return mask, valid, tau, lengths
+
+
+def test_solo_masking_hides_one_person_and_masks_the_other_on_the_schedule():
+    batch = 400
+    mask, valid, tau, _ = _scheduled_one_person(solo_masking, batch)
     whole = (mask | ~valid).flatten(2).all(2)  # (B, 2) persons wholly masked
     absent = whole[:, 1].long()  # person B when both are (a one-token person), else the whole one
     assert whole.any(1).all()
@@ -160,12 +166,7 @@ def test_training_mask_with_p_solo_mixes_three_kinds_and_keeps_the_paper_stream(
 
 def test_partner_masking_shows_one_person_whole_and_masks_the_other_on_the_schedule():
     batch = 400
-    lengths = torch.randint(1, STEPS + 1, (batch,), generator=torch.Generator().manual_seed(1))
-    a, b = _tokens(batch, lengths)
-    tau = torch.rand(batch, generator=torch.Generator().manual_seed(2)).double()
-    mask = partner_masking(a, b, lengths, tau=tau, generator=torch.Generator().manual_seed(3))
-    valid = valid_tokens(torch.stack([a, b], 1), lengths)
-    assert not (mask & ~valid).any()  # padding is never masked
+    mask, valid, tau, lengths = _scheduled_one_person(partner_masking, batch)
     per_person = mask.flatten(2).sum(2)  # (B, 2)
     assert ((per_person == 0).sum(1) == 1).all()  # exactly one person, the partner, is whole
     masked = (per_person[:, 1] > 0).long()
@@ -174,6 +175,7 @@ def test_partner_masking_shows_one_person_whole_and_masks_the_other_on_the_sched
     assert torch.equal(per_person.sum(1).double(), expected)
     assert 0.4 < masked.double().mean() < 0.6  # either person may be the masked one
     # tau = 0 is interaction masking: the masked person is hidden wholly
+    a, b = _tokens(batch, lengths)
     zero = partner_masking(
         a, b, lengths, tau=torch.zeros(batch, dtype=torch.float64), generator=torch.Generator()
     )
@@ -184,28 +186,15 @@ def test_training_mask_with_p_partner_replaces_interaction_masking_and_keeps_the
     batch = 2000
     lengths = torch.full((batch,), STEPS)
     a, b = _tokens(batch, lengths)
-    without = training_mask(
-        a, b, lengths, p_random=0.5, p_solo=0.5, generator=torch.Generator().manual_seed(5)
-    )
-    same = training_mask(
-        a,
-        b,
-        lengths,
-        p_random=0.5,
-        p_solo=0.5,
-        p_partner=0.0,
-        generator=torch.Generator().manual_seed(5),
-    )
+
+    def demo_mask(**partner):  # gen_demo's mix, the same generator seed each time
+        generator = torch.Generator().manual_seed(5)
+        return training_mask(
+            a, b, lengths, p_random=0.5, p_solo=0.5, generator=generator, **partner
+        )
+
+    without, same, out = demo_mask(), demo_mask(p_partner=0.0), demo_mask(p_partner=1.0)
     assert torch.equal(without.mask, same.mask) and torch.equal(without.tau, same.tau)
-    out = training_mask(
-        a,
-        b,
-        lengths,
-        p_random=0.5,
-        p_solo=0.5,
-        p_partner=1.0,
-        generator=torch.Generator().manual_seed(5),
-    )
     assert torch.equal(out.is_random, without.is_random)
     n = ROWS * STEPS
     per_person = out.mask.flatten(2).sum(2)  # (B, 2)
