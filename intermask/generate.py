@@ -38,6 +38,7 @@ from intermask.interm.decoding import (
     ITERATIONS,
     NOISE,
     PERSONS,
+    REVISITS,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -87,6 +88,7 @@ class Settings:
     schedule: str = SCHEDULE
     noise: str = NOISE
     persons: str = PERSONS
+    revisits: int = REVISITS
     batch_size: int = 32
     fps: float = 30.0
 
@@ -251,6 +253,7 @@ def generate_samples(
         schedule=settings.schedule,
         noise=settings.noise,
         persons=settings.persons,
+        revisits=settings.revisits,
     )
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
@@ -518,6 +521,7 @@ def run(request: Request) -> list[Path]:
         schedule=request.schedule or sampler["schedule"],
         noise=request.noise or sampler["noise"],
         persons=request.persons or sampler["persons"],
+        revisits=sampler["revisits"],
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

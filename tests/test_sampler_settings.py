@@ -15,6 +15,7 @@ from intermask.interm.decoding import (
     ITERATIONS,
     NOISE,
     PERSONS,
+    REVISITS,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -29,6 +30,7 @@ LIBRARY = {
     "schedule": SCHEDULE,
     "noise": NOISE,
     "persons": PERSONS,
+    "revisits": REVISITS,
 }
 
 

@@ -55,6 +55,7 @@ NOISE = "per_sample"  # "per_sample" (each sample its own generator) or "referen
 NOISES = ("per_sample", "reference")
 PERSONS = "together"  # "together" (section 3.3: both persons each pass) or "in_turn" (see generate)
 PERSON_ORDERS = ("together", "in_turn")
+REVISITS = 0  # in-turn decoding: later turns that re-decode one person given the other
 
 
 class Edit(NamedTuple):
@@ -359,6 +360,7 @@ def generate(
     schedule: str = SCHEDULE,
     noise: str = NOISE,
     persons: str = PERSONS,
+    revisits: int = REVISITS,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -388,6 +390,11 @@ def generate(
         persons: "together" (the paper: both persons in every pass) or "in_turn": ``iterations``
             passes for person A with B all [MASK], then ``iterations`` for B given A (2I passes;
             the module docstring says why). An alternative-modeling model always decodes in turn.
+        revisits: with ``persons="in_turn"``, this many more turns after B's: person A's
+            generated tokens are all [MASK]ed and decoded again given B's finished tokens, then
+            B's given the new A, alternating (``iterations`` passes each). The first turn of A
+            saw no B; a revisit sees it (docs/learning.md, tenth pass). 0 is plain in-turn
+            decoding.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
@@ -402,6 +409,10 @@ def generate(
         raise ValueError(f"noise must be one of {NOISES}, got {noise!r}")
     if persons not in PERSON_ORDERS:
         raise ValueError(f"persons must be one of {PERSON_ORDERS}, got {persons!r}")
+    if revisits < 0 or (revisits > 0 and persons != "in_turn"):
+        raise ValueError(
+            f"revisits must be >= 0 and needs persons='in_turn', got {revisits} with {persons!r}"
+        )
     for given in (reference_tokens, None if edit is None else edit.tokens):
         if given is not None and steps is None:
             steps = given.shape[-1]
@@ -431,10 +442,13 @@ def generate(
         if model.modeling == "alternative":
             tokens = _decode_alternative(model, tokens, undecided, iterations, settings)
         elif persons == "in_turn":
-            for person in (0, 1):  # B's undecided tokens stay [MASK] while A is decoded
+            # B's undecided tokens stay [MASK] while A is decoded; a revisit masks one person's
+            # generated tokens again and decodes them given the other's
+            for turn in range(2 + revisits):
                 own = undecided.clone()
-                own[:, 1 - person] = False
+                own[:, 1 - turn % 2] = False
                 if bool(own.any()):
+                    tokens = tokens.masked_fill(own, model.vocabulary.mask_id)
                     tokens = _decode_collaborative(model, tokens, own, iterations, settings)
         else:
             tokens = _decode_collaborative(model, tokens, undecided, iterations, settings)

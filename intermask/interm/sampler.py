@@ -17,6 +17,7 @@ from intermask.interm.decoding import (
     ITERATIONS,
     NOISE,
     PERSONS,
+    REVISITS,
     SCHEDULE,
     TEMPERATURE,
     TOP_K_RATIO,
@@ -75,8 +76,8 @@ def checked_steps(
 class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
-    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise`` and
-    ``persons`` default to the paper's inference settings (section 3.3, appendix C.1).
+    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise``,
+    ``persons`` and ``revisits`` default to the paper's inference settings (section 3.3, appendix C.1).
     """
 
     def __init__(
@@ -92,11 +93,12 @@ class InteractionSampler:
         schedule: str = SCHEDULE,
         noise: str = NOISE,
         persons: str = PERSONS,
+        revisits: int = REVISITS,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
         self.iterations, self.cfg_scale = iterations, cfg_scale
         self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
-        self.noise, self.persons = noise, persons
+        self.noise, self.persons, self.revisits = noise, persons, revisits
 
     @property
     def device(self) -> torch.device:
@@ -143,6 +145,7 @@ class InteractionSampler:
             schedule=self.schedule,
             noise=self.noise,
             persons=self.persons,
+            revisits=self.revisits,
             seeds=seeds,
             reference_tokens=reference_tokens,
             edit=edit,

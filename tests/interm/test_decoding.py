@@ -239,6 +239,48 @@ def test_in_turn_decodes_person_a_with_b_masked_then_b_given_a(tiny, monkeypatch
     assert not torch.equal(tokens, _run(model, text))  # a different decoding from "together"
 
 
+def test_revisits_decode_a_again_given_b_then_b_given_the_new_a(tiny, monkeypatch):
+    """revisits=2: after A's and B's turns, A's tokens are all [MASK] again and decoded beside
+    B's finished ones, then B's beside the new A's; each turn on the paper's schedule."""
+    from intermask.interm import decoding
+
+    model, text = tiny
+    mask = model.vocabulary.mask_id
+    seen = []
+    original = decoding.guided_logits
+
+    def recording(model, tokens, *args, **kwargs):
+        seen.append(tuple((tokens[:, p] == mask).flatten(1).sum(1).tolist() for p in (0, 1)))
+        return original(model, tokens, *args, **kwargs)
+
+    monkeypatch.setattr(decoding, "guided_logits", recording)
+    plain = _run(model, text, persons="in_turn")
+    seen.clear()
+    tokens = _run(model, text, persons="in_turn", revisits=2)
+    per_person = [ROWS * int(length) for length in LENGTHS]
+    assert len(seen) == 4 * ITERATIONS
+    for turn in range(4):
+        person = turn % 2
+        for i, counts in enumerate(seen[turn * ITERATIONS : (turn + 1) * ITERATIONS]):
+            gamma = 1.0 if i == 0 else math.cos(math.pi / 2 * i / ITERATIONS)
+            assert list(counts[person]) == [math.ceil(gamma * n - 1e-9) for n in per_person]
+            # the other person: all [MASK] while A's first turn runs, finished afterwards
+            assert list(counts[1 - person]) == (per_person if turn == 0 else [0, 0, 0])
+    valid = _valid()
+    assert ((tokens[valid] >= 0) & (tokens[valid] < K)).all() and (tokens[~valid] == -1).all()
+    assert not torch.equal(tokens, plain)  # the revisits change the result
+    # a reaction's fixed person A is never revisited
+    reference = torch.randint(0, K, (3, ROWS, STEPS), generator=torch.Generator().manual_seed(8))
+    reaction = _run(model, text, reference_tokens=reference, persons="in_turn", revisits=1)
+    assert torch.equal(reaction[:, 0][valid[:, 0]], reference[valid[:, 0]])
+    for bad, persons in ((-1, "in_turn"), (1, "together")):
+        with pytest.raises(
+            ValueError,
+            match=f"revisits must be >= 0 and needs persons='in_turn', got {bad} with '{persons}'",
+        ):
+            _run(model, text, persons=persons, revisits=bad)
+
+
 def test_in_turn_keeps_fixed_tokens_and_is_checked(tiny):
     model, text = tiny
     reference = torch.randint(0, K, (3, ROWS, STEPS), generator=torch.Generator().manual_seed(8))
