@@ -133,6 +133,13 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text}")
+    return value
+
+
 def _non_negative_float(text: str) -> float:
     value = float(text)
     if not math.isfinite(value) or value < 0:
@@ -238,6 +245,11 @@ def _add_generate_parser(commands) -> None:
         "--persons",
         choices=("together", "in_turn"),
         help="both persons every pass (default, the paper) or person A first, then B given A",
+    )
+    parser.add_argument(
+        "--revisits",
+        type=_non_negative_int,
+        help="in_turn only: extra turns that re-decode A given B, then B given the new A (0)",
     )
     parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
     parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")

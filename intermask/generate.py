@@ -61,6 +61,7 @@ MOMASK_MODULES = {MASK_MODULE: "mask", RESIDUAL_MODULE: "residual"}
 # Request fields of two-person decoding -> their option, refused with a MoMask run
 INTERM_ONLY = {
     "persons": "--persons",
+    "revisits": "--revisits",
     "schedule": "--schedule",
     "noise": "--noise",
     "reaction": "--reaction",
@@ -464,6 +465,7 @@ class Request:
     schedule: str | None = None
     noise: str | None = None
     persons: str | None = None
+    revisits: int | None = None
     batch_size: int | None = None
     fps: float | None = None
     reaction: str | None = None
@@ -501,6 +503,9 @@ def run(request: Request) -> list[Path]:
         raise ValueError("--edit FILE needs --frames A:B (and --frames A:B needs --edit)")
     if request.reaction and request.edit:
         raise ValueError("--reaction and --edit are exclusive")
+    persons = request.persons or defaults["sampler"]["persons"]
+    if request.revisits and persons != "in_turn":
+        raise ValueError(f"--revisits {request.revisits} needs --persons in_turn, got {persons!r}")
     count = request.samples or defaults["samples"]
     out = Path(request.out or defaults["out"])
     folders = sample_folders(captions, count, out)
@@ -521,7 +526,7 @@ def run(request: Request) -> list[Path]:
         schedule=request.schedule or sampler["schedule"],
         noise=request.noise or sampler["noise"],
         persons=request.persons or sampler["persons"],
-        revisits=sampler["revisits"],
+        revisits=sampler["revisits"] if request.revisits is None else request.revisits,
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

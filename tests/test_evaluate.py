@@ -260,6 +260,24 @@ def test_the_generate_job_runs_from_python_as_from_the_command_line(runs, tmp_pa
     assert np.load(folders[0] / "features.npy").shape == (2, 28, 262)  # 1 s at 30 fps -> 28
 
 
+def test_generate_revisits_re_decode_in_turn_and_are_refused_together(runs, tmp_path, capsys):
+    base = ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
+    base += ["--iterations", "1", "--no-render", "--persons", "in_turn"]
+    for revisits in ("0", "1"):
+        out = tmp_path / revisits
+        assert cli([*base, "--revisits", revisits, "--out", str(out)]) == 0, capsys.readouterr().err
+    plain, revisited = (tmp_path / r / "they_hug_00-00" for r in ("0", "1"))
+    assert json.loads((revisited / "sample.json").read_text())["settings"]["revisits"] == 1
+    motions = [np.load(folder / "features.npy") for folder in (plain, revisited)]
+    assert motions[0].shape == motions[1].shape == (2, 28, 262)
+    assert not np.array_equal(*motions)  # the same seed: the revisit re-decoded the persons
+    before = sorted(tmp_path.rglob("*"))
+    together = [*base[:-2], "--persons", "together", "--revisits", "2", "--out", str(tmp_path)]
+    assert cli(together) == 2
+    assert "--revisits 2 needs --persons in_turn, got 'together'" in capsys.readouterr().err
+    assert sorted(tmp_path.rglob("*")) == before
+
+
 def _features_file(tmp_path: Path) -> Path:
     generator = np.random.default_rng(0)
     path = tmp_path / "pair.npy"

@@ -41,13 +41,14 @@ def test_generate_and_eval_compose_the_library_defaults():
         paper = compose("eval", overrides=["eval_ckpt=x.ckpt"])
         demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
     assert dict(paper.sampler) == LIBRARY
-    # the demo's changes: persons in turn, 5 iterations each (the passes of 10 together), and
-    # a weaker guidance (docs/learning.md, ninth pass)
+    # the demo's changes: persons in turn, 5 iterations each, a weaker guidance (docs/learning.md,
+    # ninth pass) and one revisit of both persons (eleventh pass)
     assert dict(demo.sampler) == {
         **LIBRARY,
         "iterations": 5,
         "persons": "in_turn",
         "cfg_scale": 1.5,
+        "revisits": 1,
     }
 
 
@@ -62,4 +63,5 @@ def test_demo_samples_are_decoded_as_the_demo_table():
     assert int(flags["iterations"]) == demo.sampler.iterations
     assert float(flags["cfg-scale"]) == demo.sampler.cfg_scale
     assert flags["persons"] == demo.sampler.persons
+    assert int(flags["revisits"]) == demo.sampler.revisits
     assert round(float(flags["seconds"]) * FPS) == demo.data.max_length  # the crops' frames
