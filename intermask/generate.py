@@ -525,7 +525,7 @@ def run(request: Request) -> list[Path]:
         temperature=sampler["temperature"] if request.temperature is None else request.temperature,
         schedule=request.schedule or sampler["schedule"],
         noise=request.noise or sampler["noise"],
-        persons=request.persons or sampler["persons"],
+        persons=persons,
         revisits=sampler["revisits"] if request.revisits is None else request.revisits,
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
