@@ -413,6 +413,11 @@ def generate(
         raise ValueError(
             f"revisits must be >= 0 and needs persons='in_turn', got {revisits} with {persons!r}"
         )
+    if revisits and model.modeling == "alternative":  # its rounds interleave the persons
+        raise ValueError(
+            f"revisits ({revisits}) re-decode a collaborative model's turns; this model decodes "
+            "the persons alternately (modeling='alternative'): use revisits=0"
+        )
     for given in (reference_tokens, None if edit is None else edit.tokens):
         if given is not None and steps is None:
             steps = given.shape[-1]

@@ -153,6 +153,11 @@ def test_decoding_returns_codes_with_one_person_per_pass(alternative, build):
     assert shapes == [(6, ROWS * STEPS, 32)] * (2 * ITERATIONS)
 
 
+def test_revisits_are_refused_rather_than_ignored(alternative, build):
+    with pytest.raises(ValueError, match=r"revisits \(1\) re-decode a collaborative model's turns"):
+        _run(alternative, build.text(3), persons="in_turn", revisits=1)
+
+
 def test_persons_alternate_and_b_sees_what_a_kept(alternative, build, monkeypatch):
     calls = []
     forward = alternative.forward_person
