@@ -22,7 +22,13 @@ def vq_checkpoint(synthetic_interhuman_root, tmp_path_factory) -> Path:
     return run / "checkpoints" / "last.ckpt"
 
 
-def _gen_config(data_root: Path, vq_ckpt: Path, output_dir: Path, data: str = "synthetic"):
+def _gen_config(
+    data_root: Path,
+    vq_ckpt: Path,
+    output_dir: Path,
+    data: str = "synthetic",
+    extra: tuple[str, ...] = (),
+):
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(
             "train_gen",
@@ -32,6 +38,7 @@ def _gen_config(data_root: Path, vq_ckpt: Path, output_dir: Path, data: str = "s
                 "debug=gen",
                 f"text.cache_dir={output_dir / 'text_cache'}",
                 f"vq_ckpt={vq_ckpt}",
+                *extra,
             ],
         )
     with open_dict(cfg):
@@ -63,6 +70,24 @@ def test_train_gen_learns_on_frozen_tokens(synthetic_interhuman_root, vq_checkpo
     assert all(key.startswith("net.") for key in checkpoint["state_dict"])  # frozen parts stay out
     vq_after = load_vq(vq_checkpoint).state_dict()
     assert all(torch.equal(vq_before[key], vq_after[key]) for key in vq_before)
+
+
+def test_a_generator_with_code_vectors_loads_them_with_its_weights(
+    synthetic_interhuman_root, vq_checkpoint, tmp_path
+):
+    from intermask.interm.load import load_generator
+
+    config = _gen_config(
+        synthetic_interhuman_root, vq_checkpoint, tmp_path, extra=("model.code_vectors=true",)
+    )
+    train(config)
+    stored = _last(tmp_path)
+    assert stored["hyper_parameters"]["code_dim"] == 16  # the debug tokenizer's code width
+    loaded = load_generator(tmp_path)
+    assert loaded.net.code_dim == 16
+    base = loaded.vq.quantizer.layers[0].codebook
+    torch.testing.assert_close(loaded.net.code_vectors[:32], base / base.pow(2).mean().sqrt())
+    torch.testing.assert_close(loaded.net.code_vectors, stored["state_dict"]["net.code_vectors"])
 
 
 def test_warmup_is_a_quarter_of_the_first_epoch():

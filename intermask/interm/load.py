@@ -117,7 +117,11 @@ def load_generator(
                 f"{run.checkpoint}: its config leaves the codebook size to the VQ-VAE, but the "
                 "checkpoint records none (hyper_parameters.codebook_size)"
             )
-        net = net(codebook_size=int(hyper_parameters["codebook_size"]))
+        code_dim = hyper_parameters.get("code_dim")  # absent before code vectors existed
+        net = net(
+            codebook_size=int(hyper_parameters["codebook_size"]),
+            code_dim=None if code_dim is None else int(code_dim),
+        )
     net.load_state_dict(run.weights("net."))
     vq = load_vq(vq_path, map_location=map_location)
     check_vq_matches(net, vq, hyper_parameters, run.checkpoint, vq_path)

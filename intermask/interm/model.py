@@ -21,6 +21,7 @@ from typing import NamedTuple
 import torch
 from einops import rearrange
 from torch import nn
+from torch.nn import functional as F
 
 from intermask.interm.attention import MultiHeadAttention
 from intermask.interm.blocks import AdaLNModulation, InterMBlock, adaptive_norm, modulate
@@ -89,6 +90,10 @@ class InterMTransformer(nn.Module):
             :class:`~intermask.interm.blocks.InterMBlock`.
         text_attends_padding: the text layers attend to all L CLIP positions, the padding after
             end-of-text included, as the reference does (default: padding is masked out).
+        code_dim: None (the paper: a code enters only through its learned embedding) or the
+            width of the VQ-VAE's code vectors: each motion code's input then also carries its
+            codebook vector, through a learned projection (:meth:`set_code_vectors`;
+            docs/learning.md, twelfth pass). The vectors are a buffer, saved with the weights.
         modeling: ``"collaborative"`` (section 3.2) or ``"alternative"`` (appendix E, Table 3).
             Alternative modeling builds the same layers (same parameter count) but updates only
             the predicted person's embeddings in the blocks; the other person's input
@@ -119,6 +124,7 @@ class InterMTransformer(nn.Module):
         cross_context_quirk: bool = False,
         text_attends_padding: bool = False,
         modeling: str = "collaborative",
+        code_dim: int | None = None,
     ) -> None:
         super().__init__()
         if modeling not in MODELINGS:
@@ -143,6 +149,14 @@ class InterMTransformer(nn.Module):
 
         self.token_embedding = nn.Embedding(self.vocabulary.size, token_embed_dim)
         self.token_projection = nn.Linear(token_embed_dim, width)
+        self.code_dim = code_dim
+        self.code_projection: nn.Linear | None = None
+        if code_dim is not None:
+            if code_dim < 1:
+                raise ValueError(f"code_dim must be None or positive, got {code_dim}")
+            # rows of [MASK], [PAD] and [SEP] stay zero: those carry their learned embedding only
+            self.register_buffer("code_vectors", torch.zeros(self.vocabulary.size, code_dim))
+            self.code_projection = nn.Linear(code_dim, width)
         self.input_dropout = nn.Dropout(dropout)
 
         self.text_encoder = post_norm_gelu_encoder(
@@ -176,11 +190,30 @@ class InterMTransformer(nn.Module):
         # PyTorch's defaults), attention in-projections Xavier, AdaLN regressors zero.
         for part in (self.token_embedding, self.token_projection, self.condition_projection):
             part.apply(_normal_init)
+        if self.code_projection is not None:
+            self.code_projection.apply(_normal_init)
         self.blocks.apply(_normal_init)
         self.head.apply(_normal_init)
         for module in self.modules():
             if isinstance(module, AdaLNModulation | MultiHeadAttention):
                 module.reset_parameters()
+
+    @torch.no_grad()
+    def set_code_vectors(self, codebook: torch.Tensor) -> None:
+        """Copy the VQ-VAE's ``(K, code_dim)`` codebook into the code-vector buffer, scaled to
+        unit RMS (the codebook's own scale depends on its training; the projection's does not)."""
+        if self.code_dim is None:
+            raise ValueError("set_code_vectors needs a network built with code_dim")
+        expected = (self.codebook_size, self.code_dim)
+        if tuple(codebook.shape) != expected:
+            raise ValueError(
+                f"the codebook must be {expected} (codes x code_dim), got {tuple(codebook.shape)}"
+            )
+        rms = codebook.float().pow(2).mean().sqrt()
+        if not bool(torch.isfinite(rms)) or float(rms) == 0.0:
+            raise ValueError(f"the codebook has no usable scale (RMS {float(rms)})")
+        self.code_vectors.zero_()
+        self.code_vectors[: self.codebook_size] = (codebook.float() / rms).to(self.code_vectors)
 
     def encode_condition(
         self, text: TextFeatures | tuple, drop_condition: torch.Tensor | None = None
@@ -223,6 +256,8 @@ class InterMTransformer(nn.Module):
         )  # (B, 2N + 1)
         padding = sequence_padding_mask(sequence, codebook_size=self.codebook_size)
         x = self.token_projection(self.token_embedding(sequence))  # (B, 2N + 1, D)
+        if self.code_projection is not None:
+            x = x + self.code_projection(F.embedding(sequence, self.code_vectors))
         steps = tokens_a.shape[-1]
         return self.input_dropout(add_grid_encoding(x, rows=self.rows, steps=steps)), padding
 

@@ -98,6 +98,11 @@ def masked_accuracy(
     return (logits[mask].argmax(dim=-1) == targets[mask]).float().mean()
 
 
+def _base_codebook(vq: MotionVQVAE) -> torch.Tensor:
+    """The (K, code_dim) codebook of the VQ-VAE's base layer, whose codes Inter-M generates."""
+    return vq.quantizer.layers[0].codebook
+
+
 class InterMModule(FrozenTokenizerHooks, LossStepsModule):
     """Trains :class:`InterMTransformer` on interaction batches of the DataModule.
 
@@ -133,6 +138,9 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         token_cache: keep the VQ codes of every crop the batches identify (``id``, ``start``,
             ``persons``, ``mirrored``, ``reference``) and reuse them instead of re-encoding; exact
             (:mod:`intermask.interm.token_cache`), emptied when the VQ changes.
+        code_vectors: each motion code's input also carries the VQ's codebook vector for it,
+            through a learned projection (``InterMTransformer(code_dim=...)``, built here with
+            the VQ's code width); off in the paper (docs/learning.md, twelfth pass).
     """
 
     def __init__(
@@ -154,13 +162,22 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         sample_iterations: int = 10,
         fps: float = 30.0,
         token_cache: bool = True,
+        code_vectors: bool = False,
     ) -> None:
         super().__init__()
         if isinstance(vq.view, TwoPersonView):
             raise ValueError("the Inter-M Transformer needs a single-person VQ-VAE, got persons=2")
         vq_codes = vq.quantizer.codebook_size
+        code_dim = int(_base_codebook(vq).shape[1]) if code_vectors else None
         if not isinstance(net, InterMTransformer):  # a factory: the VQ owns the codebook size
-            net = net(codebook_size=vq_codes)
+            net = net(codebook_size=vq_codes, code_dim=code_dim)
+        if net.code_dim != code_dim:
+            raise ValueError(
+                f"code_vectors={code_vectors} needs net.code_dim {code_dim} (the VQ's code width "
+                f"when on, None when off), got {net.code_dim}"
+            )
+        if code_dim is not None:
+            net.set_code_vectors(_base_codebook(vq))
         if vq_codes != net.codebook_size:
             raise ValueError(
                 f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"
@@ -208,6 +225,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
                 # the tokens mean something only to this VQ: loaders check it (load_generator)
                 "vq_digest": weights_digest(vq),
                 "codebook_size": int(vq_codes),  # what load_generator builds the network with
+                "code_dim": code_dim,  # the same, None without code vectors
             },
             logger=False,
         )

@@ -188,3 +188,40 @@ def test_text_attends_padding_is_the_references_switch(build):
     assert not paper.text_attends_padding and reference.text_attends_padding
     torch.testing.assert_close(paper.encode_condition(text), paper.encode_condition(other))
     assert not torch.allclose(reference.encode_condition(text), reference.encode_condition(other))
+
+
+def test_code_vectors_add_each_codes_codebook_vector_to_its_input(build):
+    plain = build.model()
+    assert plain.code_dim is None and plain.code_projection is None
+    assert "code_vectors" not in plain.state_dict()
+    model = build.model(code_dim=6)
+    codebook = torch.randn(16, 6, generator=torch.Generator().manual_seed(3)) * 4.0
+    model.set_code_vectors(codebook)
+    rms = codebook.pow(2).mean().sqrt()
+    torch.testing.assert_close(model.code_vectors[:16], codebook / rms)
+    assert float(model.code_vectors[:16].pow(2).mean()) == pytest.approx(1.0, rel=1e-5)
+    assert not model.code_vectors[16:].any()  # [MASK], [PAD], [SEP] carry no vector
+    assert "code_vectors" in model.state_dict()  # saved with the weights, loaded strictly
+    a, b = build.tokens(2, 3)
+    text, lengths = build.text(2), torch.tensor([3, 2])
+    before = model(a, b, text, lengths).logits_a
+    model.set_code_vectors(codebook.flip(0))  # other vectors for the same codes: other logits
+    after = model(a, b, text, lengths).logits_a
+    assert not torch.allclose(before, after, atol=1e-4)
+    # an all-[MASK] input sees no code vector at all
+    masked = torch.full_like(a, 16)
+    first = model(masked, masked, text, lengths).logits_a
+    model.set_code_vectors(codebook)
+    torch.testing.assert_close(model(masked, masked, text, lengths).logits_a, first)
+
+
+def test_code_vectors_refuse_what_they_cannot_use(build):
+    with pytest.raises(ValueError, match="code_dim must be None or positive, got 0"):
+        build.model(code_dim=0)
+    with pytest.raises(ValueError, match="set_code_vectors needs a network built with code_dim"):
+        build.model().set_code_vectors(torch.ones(16, 6))
+    model = build.model(code_dim=6)
+    with pytest.raises(ValueError, match=r"must be \(16, 6\) \(codes x code_dim\), got \(16, 5\)"):
+        model.set_code_vectors(torch.ones(16, 5))
+    with pytest.raises(ValueError, match=r"the codebook has no usable scale \(RMS 0.0\)"):
+        model.set_code_vectors(torch.zeros(16, 6))

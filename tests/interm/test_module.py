@@ -60,6 +60,11 @@ def _net(**overrides: object) -> InterMTransformer:
     return InterMTransformer(**{**config, **overrides})
 
 
+def _net_factory(**built: object) -> InterMTransformer:
+    """What Hydra's ``_partial_`` network is: InterMModule completes it from the VQ."""
+    return _net(**built)
+
+
 def _module(encoder, tmp_path, **overrides: object) -> InterMModule:
     kwargs = {
         "net": _net(),
@@ -193,6 +198,25 @@ def test_mismatched_codebook_and_text_width_are_rejected(encoder, tmp_path):
         _module(encoder, tmp_path, net=_net(text_dim=40, text_heads=2))
     with pytest.raises(ValueError, match="condition_drop must lie in"):
         _module(encoder, tmp_path, condition_drop=1.5)
+
+
+def test_code_vectors_come_from_the_vqs_base_codebook(encoder, tmp_path):
+    factory = partial(_net_factory)
+    module = _module(encoder, tmp_path, net=factory, code_vectors=True)
+    base = module.vq.quantizer.layers[0].codebook  # Inter-M generates base-layer codes
+    assert module.net.code_dim == 16 == base.shape[1]
+    torch.testing.assert_close(module.net.code_vectors[:CODEBOOK], base / base.pow(2).mean().sqrt())
+    assert module.hparams.code_dim == 16
+    assert _module(encoder, tmp_path, net=factory).net.code_dim is None  # off: the paper
+    assert _module(encoder, tmp_path, net=factory).hparams.code_dim is None
+    with pytest.raises(
+        ValueError,
+        match=r"code_vectors=True needs net.code_dim 16 \(the VQ's code width when on, None "
+        r"when off\), got None",
+    ):
+        _module(encoder, tmp_path, net=_net(), code_vectors=True)
+    with pytest.raises(ValueError, match=r"code_vectors=False needs net.code_dim None .* got 16"):
+        _module(encoder, tmp_path, net=_net(code_dim=16))
 
 
 def test_two_step_fit_trains_the_net_and_saves_a_weights_only_checkpoint(encoder, tmp_path):
