@@ -73,14 +73,6 @@ def channels_last(x: torch.Tensor) -> torch.Tensor:
     return x.contiguous(memory_format=torch.channels_last)
 
 
-def _weights_channels_last(module: nn.Module, layout: TokenLayout) -> None:
-    """Keep the 2D convolutions' weights in NHWC order too: with NCHW weights and NHWC inputs,
-    oneDNN reorders every weight on every call (9% of a paper-size VQ round trip on a CPU). The
-    results are bitwise the same; loading a checkpoint copies into this layout."""
-    if layout == "2d":
-        module.to(memory_format=torch.channels_last)
-
-
 def _to_grid(x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
     """(B, T, J, C) features -> the convolution input, (B, C, J, T) or (B, J*C, T)."""
     if layout == "2d":
@@ -180,7 +172,6 @@ class MotionEncoder(nn.Module):
             *downsample,
             _conv(layout, width, width, (3, 3)),
         )
-        _weights_channels_last(self, layout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         latent = self.net(_to_grid(x, self.layout))
@@ -247,7 +238,6 @@ class MotionDecoder(nn.Module):
             nn.ReLU(),
             _end(ends, layout, width, head_out, width),
         )
-        _weights_channels_last(self, layout)
 
     def forward(self, latent: torch.Tensor) -> torch.Tensor:
         if self.layout == "2d":
