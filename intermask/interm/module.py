@@ -171,6 +171,10 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         code_dim = int(_base_codebook(vq).shape[1]) if code_vectors else None
         if not isinstance(net, InterMTransformer):  # a factory: the VQ owns the codebook size
             net = net(codebook_size=vq_codes, code_dim=code_dim)
+        if vq_codes != net.codebook_size:
+            raise ValueError(
+                f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"
+            )
         if net.code_dim != code_dim:
             raise ValueError(
                 f"code_vectors={code_vectors} needs net.code_dim {code_dim} (the VQ's code width "
@@ -178,10 +182,6 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
             )
         if code_dim is not None:
             net.set_code_vectors(_base_codebook(vq))
-        if vq_codes != net.codebook_size:
-            raise ValueError(
-                f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"
-            )
         if text.encoder.width != net.text_dim:
             raise ValueError(
                 f"net.text_dim ({net.text_dim}) must equal the text encoder width ({text.encoder.width})"
