@@ -256,8 +256,8 @@ class InterMTransformer(nn.Module):
         )  # (B, 2N + 1)
         padding = sequence_padding_mask(sequence, codebook_size=self.codebook_size)
         x = self.token_projection(self.token_embedding(sequence))  # (B, 2N + 1, D)
-        if self.code_projection is not None:
-            x = x + self.code_projection(F.embedding(sequence, self.code_vectors))
+        if self.code_projection is not None:  # project the vocabulary's table once, then look up
+            x = x + F.embedding(sequence, self.code_projection(self.code_vectors))
         steps = tokens_a.shape[-1]
         return self.input_dropout(add_grid_encoding(x, rows=self.rows, steps=steps)), padding
 

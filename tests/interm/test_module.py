@@ -60,11 +60,6 @@ def _net(**overrides: object) -> InterMTransformer:
     return InterMTransformer(**{**config, **overrides})
 
 
-def _net_factory(**built: object) -> InterMTransformer:
-    """What Hydra's ``_partial_`` network is: InterMModule completes it from the VQ."""
-    return _net(**built)
-
-
 def _module(encoder, tmp_path, **overrides: object) -> InterMModule:
     kwargs = {
         "net": _net(),
@@ -201,7 +196,7 @@ def test_mismatched_codebook_and_text_width_are_rejected(encoder, tmp_path):
 
 
 def test_code_vectors_come_from_the_vqs_base_codebook(encoder, tmp_path):
-    factory = partial(_net_factory)
+    factory = _net  # a factory, as Hydra's ``_partial_`` network: InterMModule completes it
     module = _module(encoder, tmp_path, net=factory, code_vectors=True)
     base = module.vq.quantizer.layers[0].codebook  # Inter-M generates base-layer codes
     assert module.net.code_dim == 16 == base.shape[1]
