@@ -251,6 +251,12 @@ def _add_generate_parser(commands) -> None:
         type=_non_negative_int,
         help="in_turn only: extra turns that re-decode A given B, then B given the new A (0)",
     )
+    parser.add_argument(
+        "--partner-scale",
+        type=_non_negative_float,
+        help="in_turn or --reaction: partner guidance, how much further a person follows what "
+        "the other's tokens add to its prediction (0, the paper)",
+    )
     parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
     parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")
     parser.add_argument(

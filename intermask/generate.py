@@ -37,6 +37,7 @@ from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
     NOISE,
+    PARTNER_SCALE,
     PERSONS,
     REVISITS,
     SCHEDULE,
@@ -62,6 +63,7 @@ MOMASK_MODULES = {MASK_MODULE: "mask", RESIDUAL_MODULE: "residual"}
 INTERM_ONLY = {
     "persons": "--persons",
     "revisits": "--revisits",
+    "partner_scale": "--partner-scale",
     "schedule": "--schedule",
     "noise": "--noise",
     "reaction": "--reaction",
@@ -90,6 +92,7 @@ class Settings:
     noise: str = NOISE
     persons: str = PERSONS
     revisits: int = REVISITS
+    partner_scale: float = PARTNER_SCALE
     batch_size: int = 32
     fps: float = 30.0
 
@@ -255,6 +258,7 @@ def generate_samples(
         noise=settings.noise,
         persons=settings.persons,
         revisits=settings.revisits,
+        partner_scale=settings.partner_scale,
     )
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
@@ -466,6 +470,7 @@ class Request:
     noise: str | None = None
     persons: str | None = None
     revisits: int | None = None
+    partner_scale: float | None = None
     batch_size: int | None = None
     fps: float | None = None
     reaction: str | None = None
@@ -506,6 +511,11 @@ def run(request: Request) -> list[Path]:
     persons = request.persons or defaults["sampler"]["persons"]
     if request.revisits and persons != "in_turn":
         raise ValueError(f"--revisits {request.revisits} needs --persons in_turn, got {persons!r}")
+    if request.partner_scale and persons != "in_turn" and not request.reaction:
+        raise ValueError(
+            f"--partner-scale {request.partner_scale} needs --persons in_turn or --reaction "
+            f"(one person decoded beside the other's tokens), got --persons {persons}"
+        )
     count = request.samples or defaults["samples"]
     out = Path(request.out or defaults["out"])
     folders = sample_folders(captions, count, out)
@@ -527,6 +537,9 @@ def run(request: Request) -> list[Path]:
         noise=request.noise or sampler["noise"],
         persons=persons,
         revisits=sampler["revisits"] if request.revisits is None else request.revisits,
+        partner_scale=(
+            sampler["partner_scale"] if request.partner_scale is None else request.partner_scale
+        ),
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
     )

@@ -278,6 +278,23 @@ def test_generate_revisits_re_decode_in_turn_and_are_refused_together(runs, tmp_
     assert sorted(tmp_path.rglob("*")) == before
 
 
+def test_generate_partner_guidance_is_recorded_and_refused_together(runs, tmp_path, capsys):
+    base = ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
+    base += ["--iterations", "2", "--no-render"]
+    in_turn = [*base, "--persons", "in_turn", "--partner-scale", "1.5", "--out", str(tmp_path)]
+    assert cli(in_turn) == 0, capsys.readouterr().err
+    record = json.loads((tmp_path / "they_hug_00-00" / "sample.json").read_text())
+    assert record["settings"]["partner_scale"] == 1.5 and record["settings"]["persons"] == "in_turn"
+    before = sorted(tmp_path.rglob("*"))
+    together = [*base, "--partner-scale", "1", "--out", str(tmp_path / "together")]
+    assert cli(together) == 2
+    assert (
+        "--partner-scale 1.0 needs --persons in_turn or --reaction (one person decoded beside "
+        "the other's tokens), got --persons together"
+    ) in capsys.readouterr().err
+    assert sorted(tmp_path.rglob("*")) == before
+
+
 def _features_file(tmp_path: Path) -> Path:
     generator = np.random.default_rng(0)
     path = tmp_path / "pair.npy"

@@ -14,6 +14,7 @@ from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
     NOISE,
+    PARTNER_SCALE,
     PERSONS,
     REVISITS,
     SCHEDULE,
@@ -31,6 +32,7 @@ LIBRARY = {
     "noise": NOISE,
     "persons": PERSONS,
     "revisits": REVISITS,
+    "partner_scale": PARTNER_SCALE,
 }
 
 

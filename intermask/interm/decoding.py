@@ -56,6 +56,7 @@ NOISES = ("per_sample", "reference")
 PERSONS = "together"  # "together" (section 3.3: both persons each pass) or "in_turn" (see generate)
 PERSON_ORDERS = ("together", "in_turn")
 REVISITS = 0  # in-turn decoding: later turns that re-decode one person given the other
+PARTNER_SCALE = 0.0  # partner guidance: g in ``+ g * (cond - cond with the partner hidden)``
 
 
 class Edit(NamedTuple):
@@ -133,6 +134,43 @@ def guided_person_logits(
         lengths_in_steps,
         cfg_scale,
     )
+
+
+def partner_guided_logits(
+    model: InterMTransformer,
+    tokens: torch.Tensor,
+    partner: torch.Tensor,
+    condition: torch.Tensor | None,
+    null: torch.Tensor,
+    lengths_in_steps: torch.Tensor,
+    cfg_scale: float,
+    partner_scale: float,
+) -> torch.Tensor:
+    """:func:`guided_logits` plus partner guidance, in one forward pass of a tripled batch
+    (doubled without text guidance):
+    ``uncond + s * (cond - uncond) + g * (cond - cond_hidden)``, where ``cond_hidden`` is the
+    conditional prediction with the ``partner`` (B, 2, rows, T') positions set to [MASK].
+
+    The model knows both predictions: interaction masking trains a person beside its visible
+    partner, solo masking beside a wholly masked one. Their difference is what the partner adds,
+    and ``g > 0`` follows it further, as text guidance follows the text (docs/learning.md,
+    thirteenth pass). Without a condition, ``cond`` is the null prediction.
+    """
+    conditional = null if condition is None else condition
+    text_guided = condition is not None and cfg_scale != 1.0  # as in guided_logits
+    hidden = tokens.masked_fill(partner, model.vocabulary.mask_id)
+    maps = torch.cat([tokens, hidden, tokens] if text_guided else [tokens, hidden])
+    conditions = [conditional, conditional, null] if text_guided else [conditional, conditional]
+    out = model.forward_with_condition(
+        maps[:, 0],
+        maps[:, 1],
+        torch.cat(conditions),
+        lengths_in_steps.repeat(len(conditions)),
+    )
+    logits = torch.stack([out.logits_a, out.logits_b], dim=1).chunk(len(conditions))
+    cond, cond_hidden = logits[0], logits[1]
+    guided = logits[2] + cfg_scale * (cond - logits[2]) if text_guided else cond
+    return guided + partner_scale * (cond - cond_hidden)
 
 
 def top_k_filter(logits: torch.Tensor, ratio: float) -> torch.Tensor:
@@ -219,6 +257,15 @@ def _start(
     return tokens.masked_fill(~valid, -1), generated
 
 
+def _partner(
+    tokens: torch.Tensor, valid: torch.Tensor, person: int, model: InterMTransformer
+) -> torch.Tensor:
+    """(B, 2, rows, T') bool: ``person``'s valid tokens that are codes (not [MASK])."""
+    partner = torch.zeros_like(valid)
+    partner[:, person] = valid[:, person] & (tokens[:, person] != model.vocabulary.mask_id)
+    return partner
+
+
 class _Settings(NamedTuple):
     condition: torch.Tensor | None  # (B, D), None = null condition only
     null: torch.Tensor  # (B, D)
@@ -229,6 +276,7 @@ class _Settings(NamedTuple):
     generators: list[torch.Generator]
     schedule: str = SCHEDULE
     noise: str = NOISE
+    partner_scale: float = PARTNER_SCALE
 
 
 def _sample(
@@ -288,18 +336,36 @@ def _decode_collaborative(
     undecided: torch.Tensor,
     iterations: int,
     settings: _Settings,
+    partner: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """Both persons in every pass (section 3.3): (B, 2, rows, T') -> (B, 2, rows, T')."""
+    """Both persons in every pass (section 3.3): (B, 2, rows, T') -> (B, 2, rows, T').
+
+    ``partner`` (B, 2, rows, T') bool: the fixed tokens of the other person, hidden in the
+    partner-guidance pass (:func:`partner_guided_logits`); None or ``partner_scale = 0``: none.
+    """
     n_generated = undecided.flatten(1).sum(1)  # (B,)
+    partnered = partner is not None and settings.partner_scale != 0 and bool(partner.any())
     for i in range(iterations):
-        logits = guided_logits(
-            model,
-            tokens,
-            settings.condition,
-            settings.null,
-            settings.lengths_in_steps,
-            settings.cfg_scale,
-        )
+        if partnered:
+            logits = partner_guided_logits(
+                model,
+                tokens,
+                partner,
+                settings.condition,
+                settings.null,
+                settings.lengths_in_steps,
+                settings.cfg_scale,
+                settings.partner_scale,
+            )
+        else:
+            logits = guided_logits(
+                model,
+                tokens,
+                settings.condition,
+                settings.null,
+                settings.lengths_in_steps,
+                settings.cfg_scale,
+            )
         sampled, confidence = _sample(logits, settings)
         tokens = torch.where(undecided, sampled, tokens)
         undecided = _remask(confidence, undecided, n_generated, i, iterations, settings.schedule)
@@ -361,6 +427,7 @@ def generate(
     noise: str = NOISE,
     persons: str = PERSONS,
     revisits: int = REVISITS,
+    partner_scale: float = PARTNER_SCALE,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -395,6 +462,11 @@ def generate(
             B's given the new A, alternating (``iterations`` passes each). The first turn of A
             saw no B; a revisit sees it (docs/learning.md, tenth pass). 0 is plain in-turn
             decoding.
+        partner_scale: g of partner guidance (:func:`partner_guided_logits`), for passes that
+            decode one person beside the other's fixed tokens: in-turn decoding's turns after
+            the first (B's turn and every revisit; the first too where an edit fixes some of
+            B's tokens), and reaction generation (B beside the fixed A). Each such pass runs
+            one more copy of the batch. 0 (the paper) is plain guidance.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
@@ -417,6 +489,16 @@ def generate(
         raise ValueError(
             f"revisits ({revisits}) re-decode a collaborative model's turns; this model decodes "
             "the persons alternately (modeling='alternative'): use revisits=0"
+        )
+    if partner_scale and model.modeling == "alternative":
+        raise ValueError(
+            f"partner_scale ({partner_scale}) guides a collaborative model's passes; this model "
+            "decodes the persons alternately (modeling='alternative'): use partner_scale=0"
+        )
+    if partner_scale and persons != "in_turn" and reference_tokens is None:
+        raise ValueError(
+            f"partner_scale ({partner_scale}) needs one person decoded beside the other's fixed "
+            f"tokens: persons='in_turn' or reference_tokens, got persons={persons!r}"
         )
     for given in (reference_tokens, None if edit is None else edit.tokens):
         if given is not None and steps is None:
@@ -443,6 +525,7 @@ def generate(
             generators,
             schedule,
             noise,
+            partner_scale,
         )
         if model.modeling == "alternative":
             tokens = _decode_alternative(model, tokens, undecided, iterations, settings)
@@ -454,9 +537,13 @@ def generate(
                 own[:, 1 - turn % 2] = False
                 if bool(own.any()):
                     tokens = tokens.masked_fill(own, model.vocabulary.mask_id)
-                    tokens = _decode_collaborative(model, tokens, own, iterations, settings)
+                    partner = _partner(tokens, valid, 1 - turn % 2, model)
+                    tokens = _decode_collaborative(
+                        model, tokens, own, iterations, settings, partner
+                    )
         else:
-            tokens = _decode_collaborative(model, tokens, undecided, iterations, settings)
+            partner = None if reference_tokens is None else _partner(tokens, valid, 0, model)
+            tokens = _decode_collaborative(model, tokens, undecided, iterations, settings, partner)
     finally:
         model.train(was_training)
     return tokens.masked_fill(~valid, -1)

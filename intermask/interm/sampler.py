@@ -16,6 +16,7 @@ from intermask.interm.decoding import (
     CFG_SCALE,
     ITERATIONS,
     NOISE,
+    PARTNER_SCALE,
     PERSONS,
     REVISITS,
     SCHEDULE,
@@ -77,7 +78,7 @@ class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
     ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise``,
-    ``persons`` and ``revisits`` default to the paper's inference settings (section 3.3, appendix C.1).
+    ``persons``, ``revisits`` and ``partner_scale`` default to the paper's inference settings (section 3.3, appendix C.1).
     """
 
     def __init__(
@@ -94,11 +95,13 @@ class InteractionSampler:
         noise: str = NOISE,
         persons: str = PERSONS,
         revisits: int = REVISITS,
+        partner_scale: float = PARTNER_SCALE,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
         self.iterations, self.cfg_scale = iterations, cfg_scale
         self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
         self.noise, self.persons, self.revisits = noise, persons, revisits
+        self.partner_scale = partner_scale
 
     @property
     def device(self) -> torch.device:
@@ -146,6 +149,7 @@ class InteractionSampler:
             noise=self.noise,
             persons=self.persons,
             revisits=self.revisits,
+            partner_scale=self.partner_scale,
             seeds=seeds,
             reference_tokens=reference_tokens,
             edit=edit,

@@ -3,7 +3,13 @@ import math
 import pytest
 import torch
 
-from intermask.interm.decoding import Edit, generate, guided_logits, null_condition
+from intermask.interm.decoding import (
+    Edit,
+    generate,
+    guided_logits,
+    null_condition,
+    partner_guided_logits,
+)
 from intermask.interm.model import TextFeatures
 
 K, ROWS, STEPS = 16, 5, 6
@@ -297,3 +303,102 @@ def test_in_turn_keeps_fixed_tokens_and_is_checked(tiny):
         ValueError, match=r"persons must be one of \('together', 'in_turn'\), got 'alone'"
     ):
         _run(model, text, persons="alone")
+
+
+@pytest.fixture
+def coupled(build):
+    """A tiny model whose persons see each other: every weight moved off its initialisation
+    (at init a person's logits hardly depend on its partner, ~1e-4)."""
+    model = build.model()
+    generator = torch.Generator().manual_seed(5)
+    with torch.no_grad():
+        for parameter in model.parameters():
+            parameter.add_(torch.randn(parameter.shape, generator=generator) * 0.2)
+    return model, build.text(3)
+
+
+def test_partner_guidance_follows_what_the_partner_adds(coupled):
+    """uncond + s (cond - uncond) + g (cond - cond with the partner's tokens [MASK]ed)."""
+    model, text = coupled
+    mask = model.vocabulary.mask_id
+    codes = torch.randint(0, K, (3, 2, ROWS, STEPS), generator=torch.Generator().manual_seed(4))
+    tokens = codes.clone()
+    tokens[:, 1] = mask  # B to decode beside A's codes
+    partner = torch.zeros_like(tokens, dtype=torch.bool)
+    partner[:, 0] = _valid()[:, 0]
+    hidden = tokens.masked_fill(partner, mask)
+    with torch.no_grad():
+        cond, null = model.encode_condition(text), null_condition(model, 3, torch.device("cpu"))
+        c = guided_logits(model, tokens, cond, null, LENGTHS, 1.0)
+        u = guided_logits(model, tokens, None, null, LENGTHS, 1.0)
+        h = guided_logits(model, hidden, cond, null, LENGTHS, 1.0)
+        both = partner_guided_logits(model, tokens, partner, cond, null, LENGTHS, 1.5, 2.0)
+        no_text = partner_guided_logits(model, tokens, partner, None, null, LENGTHS, 1.5, 2.0)
+        h_null = guided_logits(model, hidden, None, null, LENGTHS, 1.0)
+        plain = partner_guided_logits(model, tokens, partner, cond, null, LENGTHS, 1.5, 0.0)
+    assert (c - h).abs().max() > 0.5  # hiding A changes B's prediction
+    torch.testing.assert_close(both, u + 1.5 * (c - u) + 2.0 * (c - h), atol=1e-4, rtol=1e-4)
+    torch.testing.assert_close(no_text, u + 2.0 * (u - h_null), atol=1e-4, rtol=1e-4)
+    torch.testing.assert_close(
+        plain, guided_logits(model, tokens, cond, null, LENGTHS, 1.5), atol=1e-4, rtol=1e-4
+    )
+
+
+def test_partner_guidance_runs_where_one_person_is_decoded_beside_the_other(coupled, monkeypatch):
+    """In turn: not in A's first turn (B is all [MASK]), in B's turn and every revisit, each
+    pass with one more copy of the batch; a reaction: every pass. 0 is the plain decoding."""
+    from intermask.interm import decoding
+
+    model, text = coupled
+    mask = model.vocabulary.mask_id
+    batches, hidden_persons = [], []
+    forward = model.forward_with_condition
+
+    def recording(a, b, condition, lengths):
+        batches.append(a.shape[0])
+        return forward(a, b, condition, lengths)
+
+    original = decoding.partner_guided_logits
+
+    def partnered(model, tokens, partner, *args):
+        hidden_persons.append(tuple(bool(partner[:, p].any()) for p in (0, 1)))
+        assert not bool((tokens[partner] == mask).any())  # only finished codes are hidden
+        return original(model, tokens, partner, *args)
+
+    monkeypatch.setattr(model, "forward_with_condition", recording)
+    monkeypatch.setattr(decoding, "partner_guided_logits", partnered)
+    plain = _run(model, text, persons="in_turn", revisits=1)
+    batches.clear()
+    assert torch.equal(_run(model, text, persons="in_turn", revisits=1, partner_scale=0.0), plain)
+    assert batches == [6] * (3 * ITERATIONS) and hidden_persons == []
+    batches.clear()
+    guided = _run(model, text, persons="in_turn", revisits=1, partner_scale=2.0)
+    # A's turn: doubled (text guidance); B's turn hides A, the revisit of A hides B: tripled
+    assert batches == [6] * ITERATIONS + [9] * (2 * ITERATIONS)
+    assert hidden_persons == [(True, False)] * ITERATIONS + [(False, True)] * ITERATIONS
+    valid = _valid()
+    assert ((guided[valid] >= 0) & (guided[valid] < K)).all() and (guided[~valid] == -1).all()
+    assert not torch.equal(guided, plain)
+    # a reaction: B beside the fixed A in every pass; without text, no null copy
+    reference = torch.randint(0, K, (3, ROWS, STEPS), generator=torch.Generator().manual_seed(8))
+    batches.clear()
+    hidden_persons.clear()
+    reaction = _run(model, None, reference_tokens=reference, partner_scale=1.0)
+    assert batches == [6] * ITERATIONS and hidden_persons == [(True, False)] * ITERATIONS
+    assert torch.equal(reaction[:, 0][valid[:, 0]], reference[valid[:, 0]])
+    assert not torch.equal(reaction, _run(model, None, reference_tokens=reference))
+
+
+def test_partner_guidance_is_refused_where_no_person_has_a_fixed_partner(tiny, build):
+    model, text = tiny
+    with pytest.raises(
+        ValueError,
+        match=r"partner_scale \(1.0\) needs one person decoded beside the other's fixed tokens: "
+        r"persons='in_turn' or reference_tokens, got persons='together'",
+    ):
+        _run(model, text, partner_scale=1.0)
+    alternative = build.model(modeling="alternative")
+    with pytest.raises(
+        ValueError, match=r"partner_scale \(0.5\) guides a collaborative model's passes"
+    ):
+        _run(alternative, text, persons="in_turn", partner_scale=0.5)
