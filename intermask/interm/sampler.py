@@ -78,7 +78,8 @@ class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
     ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise``,
-    ``persons``, ``revisits`` and ``partner_scale`` default to the paper's inference settings (section 3.3, appendix C.1).
+    ``persons``, ``revisits`` and ``partner_scale`` default to the paper's inference settings
+    (section 3.3, appendix C.1).
     """
 
     def __init__(
