@@ -74,6 +74,11 @@ def null_condition(model: InterMTransformer, batch: int, device: torch.device) -
     return model.encode_condition(TextFeatures(features, eot), drop_condition=drop)
 
 
+def _text_guided(condition: torch.Tensor | None, cfg_scale: float) -> bool:
+    """Whether guidance needs the null condition's pass: a condition and a scale other than 1."""
+    return condition is not None and cfg_scale != 1.0
+
+
 def _guided(
     run: Callable[..., torch.Tensor],
     token_maps: tuple[torch.Tensor, ...],
@@ -84,7 +89,7 @@ def _guided(
 ) -> torch.Tensor:
     """``run(*token_maps, condition, lengths)`` with guidance: conditional and null condition
     stacked into one doubled batch, combined as ``uncond + s * (cond - uncond)``."""
-    if condition is None or cfg_scale == 1.0:
+    if not _text_guided(condition, cfg_scale):
         return run(*token_maps, null if condition is None else condition, lengths_in_steps)
     doubled = [torch.cat([t, t]) for t in token_maps]
     out = run(
@@ -157,7 +162,7 @@ def partner_guided_logits(
     thirteenth pass). Without a condition, ``cond`` is the null prediction.
     """
     conditional = null if condition is None else condition
-    text_guided = condition is not None and cfg_scale != 1.0  # as in guided_logits
+    text_guided = _text_guided(condition, cfg_scale)
     hidden = tokens.masked_fill(partner, model.vocabulary.mask_id)
     maps = torch.cat([tokens, hidden, tokens] if text_guided else [tokens, hidden])
     conditions = [conditional, conditional, null] if text_guided else [conditional, conditional]
@@ -257,12 +262,11 @@ def _start(
     return tokens.masked_fill(~valid, -1), generated
 
 
-def _partner(
-    tokens: torch.Tensor, valid: torch.Tensor, person: int, model: InterMTransformer
-) -> torch.Tensor:
-    """(B, 2, rows, T') bool: ``person``'s valid tokens that are codes (not [MASK])."""
-    partner = torch.zeros_like(valid)
-    partner[:, person] = valid[:, person] & (tokens[:, person] != model.vocabulary.mask_id)
+def _partner(tokens: torch.Tensor, person: int, model: InterMTransformer) -> torch.Tensor:
+    """(B, 2, rows, T') bool: ``person``'s codes (neither [MASK] nor padding, -1)."""
+    codes = (tokens >= 0) & (tokens != model.vocabulary.mask_id)
+    partner = torch.zeros_like(codes)
+    partner[:, person] = codes[:, person]
     return partner
 
 
@@ -336,15 +340,18 @@ def _decode_collaborative(
     undecided: torch.Tensor,
     iterations: int,
     settings: _Settings,
-    partner: torch.Tensor | None = None,
+    partner_person: int | None = None,
 ) -> torch.Tensor:
     """Both persons in every pass (section 3.3): (B, 2, rows, T') -> (B, 2, rows, T').
 
-    ``partner`` (B, 2, rows, T') bool: the fixed tokens of the other person, hidden in the
-    partner-guidance pass (:func:`partner_guided_logits`); None or ``partner_scale = 0``: none.
+    ``partner_person``: the person whose fixed codes the partner-guidance pass hides
+    (:func:`partner_guided_logits`), when ``settings.partner_scale`` is not 0; None: no such pass.
     """
     n_generated = undecided.flatten(1).sum(1)  # (B,)
-    partnered = partner is not None and settings.partner_scale != 0 and bool(partner.any())
+    partner = None
+    if partner_person is not None and settings.partner_scale != 0:
+        partner = _partner(tokens, partner_person, model)
+    partnered = partner is not None and bool(partner.any())
     for i in range(iterations):
         if partnered:
             logits = partner_guided_logits(
@@ -537,13 +544,14 @@ def generate(
                 own[:, 1 - turn % 2] = False
                 if bool(own.any()):
                     tokens = tokens.masked_fill(own, model.vocabulary.mask_id)
-                    partner = _partner(tokens, valid, 1 - turn % 2, model)
                     tokens = _decode_collaborative(
-                        model, tokens, own, iterations, settings, partner
+                        model, tokens, own, iterations, settings, partner_person=1 - turn % 2
                     )
         else:
-            partner = None if reference_tokens is None else _partner(tokens, valid, 0, model)
-            tokens = _decode_collaborative(model, tokens, undecided, iterations, settings, partner)
+            reaction = reference_tokens is not None  # B beside the fixed A
+            tokens = _decode_collaborative(
+                model, tokens, undecided, iterations, settings, 0 if reaction else None
+            )
     finally:
         model.train(was_training)
     return tokens.masked_fill(~valid, -1)
