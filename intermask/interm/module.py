@@ -38,6 +38,7 @@ from intermask.text.cache import TextFeatureCache
 from intermask.utils.distributed import gather_rows, global_mean_scale, local_rows
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.lightning import LossStepsModule
+from intermask.utils.schedules import check_lr_decay
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 from intermask.vq.views import TwoPersonView
 
@@ -129,6 +130,9 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
             warms up for a quarter epoch, i.e. ``0.25 / max_epochs``; the config computes it.
         lr_milestones, lr_gamma: the learning rate is multiplied by ``lr_gamma`` (1/3) at these
             fractions of training (0.5, 0.7, 0.85).
+        lr_decay, lr_final: ``"multistep"`` (the paper) uses the milestones; ``"cosine"`` or
+            ``"linear"`` instead decay the rate smoothly from the end of the warm-up to
+            ``lr_final`` times the base rate at the last step (no milestones then).
         validation_samples: every validation generates this many interactions from the first
             captions of the first batch (fixed seeds) and logs their joint statistics next to
             the ground truth's (``val_samples/{generated,real}_*``); 0 switches it off.
@@ -158,6 +162,8 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         step_unroll: bool = True,
         lr_milestones: Sequence[float] = (0.5, 0.7, 0.85),
         lr_gamma: float = 1 / 3,
+        lr_decay: str = "multistep",
+        lr_final: float = 0.0,
         validation_samples: int = 4,
         sample_iterations: int = 10,
         fps: float = 30.0,
@@ -196,6 +202,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
                 raise ValueError(f"{name} must lie in [0, 1], got {prob}")
         if not 0.0 <= warmup_fraction < 1.0:
             raise ValueError(f"warmup_fraction must lie in [0, 1), got {warmup_fraction}")
+        check_lr_decay(lr_decay, lr_milestones, lr_final)
         if validation_samples < 0 or sample_iterations < 1:
             raise ValueError(
                 f"validation_samples must be >= 0 and sample_iterations >= 1, got "
@@ -218,6 +225,8 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
                 "warmup_fraction": float(warmup_fraction),
                 "lr_milestones": [float(m) for m in lr_milestones],
                 "lr_gamma": float(lr_gamma),
+                "lr_decay": str(lr_decay),
+                "lr_final": float(lr_final),
                 "validation_samples": int(validation_samples),
                 "sample_iterations": int(sample_iterations),
                 "fps": float(fps),

@@ -36,8 +36,10 @@ class NonFiniteLoss(RuntimeError):
 
 class ScheduledModule(L.LightningModule):
     """Optimizer ``self.optimizer_factory`` over :meth:`optimized_parameters`, with the warm-up
-    multistep schedule of the hyper-parameters ``warmup_fraction``, ``lr_milestones`` and
-    ``lr_gamma`` (fractions of the run's optimizer steps), stepped every step.
+    schedule of the hyper-parameters ``warmup_fraction``, ``lr_milestones`` and ``lr_gamma``
+    (fractions of the run's optimizer steps), stepped every step; a module that also records
+    ``lr_decay`` and ``lr_final`` may replace the milestones by a smooth decay
+    (:func:`~intermask.utils.schedules.warmup_multistep_factor`).
 
     Training steps pass their loss terms through :meth:`skip_non_finite`: a NaN or infinite term
     stops the run (``non_finite_loss = "stop"``, the default; the checkpoints written so far are
@@ -106,6 +108,9 @@ class ScheduledModule(L.LightningModule):
             warmup_fraction=self.hparams.warmup_fraction,
             milestones=self.hparams.lr_milestones,
             gamma=self.hparams.lr_gamma,
+            # modules that predate the smooth decays record neither (checkpoints stay loadable)
+            decay=self.hparams.get("lr_decay", "multistep"),
+            final=self.hparams.get("lr_final", 0.0),
         )
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import math
 from functools import partial
+from types import SimpleNamespace
 
 import lightning as L
 import pytest
@@ -193,6 +195,29 @@ def test_mismatched_codebook_and_text_width_are_rejected(encoder, tmp_path):
         _module(encoder, tmp_path, net=_net(text_dim=40, text_heads=2))
     with pytest.raises(ValueError, match="condition_drop must lie in"):
         _module(encoder, tmp_path, condition_drop=1.5)
+
+
+def test_a_smooth_learning_rate_decay_is_recorded_and_drives_the_optimizer(encoder, tmp_path):
+    module = _module(
+        encoder, tmp_path, warmup_fraction=0.0, lr_milestones=[], lr_decay="cosine", lr_final=0.1
+    )
+    assert (module.hparams.lr_decay, module.hparams.lr_final) == ("cosine", 0.1)
+    module._trainer = SimpleNamespace(estimated_stepping_batches=4)
+    config = module.configure_optimizers()
+    optimizer, scheduler = config["optimizer"], config["lr_scheduler"]["scheduler"]
+    rates = []
+    for _ in range(5):
+        rates.append(optimizer.param_groups[0]["lr"] / 2e-4)
+        optimizer.step()
+        scheduler.step()
+    half = 0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi / 4))
+    assert rates == pytest.approx([1.0, half, 0.55, 1.1 - half, 0.1])
+    with pytest.raises(ValueError, match=r"lr_decay='linear' .* set lr_milestones to \[\]"):
+        _module(encoder, tmp_path, lr_decay="linear")  # the paper's milestones left in place
+    with pytest.raises(
+        ValueError, match="lr_decay must be one of multistep, cosine, linear, got 'exp'"
+    ):
+        _module(encoder, tmp_path, lr_decay="exp", lr_milestones=[])
 
 
 def test_code_vectors_come_from_the_vqs_base_codebook(encoder, tmp_path):
