@@ -108,7 +108,8 @@ class ScheduledModule(L.LightningModule):
             warmup_fraction=self.hparams.warmup_fraction,
             milestones=self.hparams.lr_milestones,
             gamma=self.hparams.lr_gamma,
-            # modules that predate the smooth decays record neither (checkpoints stay loadable)
+            # recorded by Inter-M only; the other modules, and Inter-M runs saved before the
+            # option existed, keep the milestones
             decay=self.hparams.get("lr_decay", "multistep"),
             final=self.hparams.get("lr_final", 0.0),
         )
