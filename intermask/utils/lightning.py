@@ -10,7 +10,7 @@ import lightning as L
 import torch
 from torch import nn
 
-from intermask.utils.schedules import warmup_multistep_optimizers
+from intermask.utils.schedules import warmup_schedule_optimizers
 from intermask.utils.seeds import keyed_generator
 
 log = logging.getLogger(__name__)
@@ -39,7 +39,7 @@ class ScheduledModule(L.LightningModule):
     schedule of the hyper-parameters ``warmup_fraction``, ``lr_milestones`` and ``lr_gamma``
     (fractions of the run's optimizer steps), stepped every step; a module that also records
     ``lr_decay`` and ``lr_final`` may replace the milestones by a smooth decay
-    (:func:`~intermask.utils.schedules.warmup_multistep_factor`).
+    (:func:`~intermask.utils.schedules.warmup_schedule_factor`).
 
     Training steps pass their loss terms through :meth:`skip_non_finite`: a NaN or infinite term
     stops the run (``non_finite_loss = "stop"``, the default; the checkpoints written so far are
@@ -101,7 +101,7 @@ class ScheduledModule(L.LightningModule):
         return self.parameters()
 
     def configure_optimizers(self) -> dict[str, Any]:
-        return warmup_multistep_optimizers(
+        return warmup_schedule_optimizers(
             self,
             self.optimizer_factory,
             parameters=self.optimized_parameters(),
@@ -109,9 +109,12 @@ class ScheduledModule(L.LightningModule):
             milestones=self.hparams.lr_milestones,
             gamma=self.hparams.lr_gamma,
             # recorded by Inter-M only; the other modules, and Inter-M runs saved before the
-            # option existed, keep the milestones
-            decay=self.hparams.get("lr_decay", "multistep"),
-            final=self.hparams.get("lr_final", 0.0),
+            # option existed, get the schedule's own default (the milestones)
+            **{
+                argument: self.hparams[name]
+                for name, argument in (("lr_decay", "decay"), ("lr_final", "final"))
+                if name in self.hparams
+            },
         )
 
 

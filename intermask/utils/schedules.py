@@ -30,7 +30,7 @@ def check_lr_decay(decay: str, milestones: Sequence[float], final: float) -> Non
         raise ValueError(f"lr_final must lie in [0, 1] (a fraction of the base rate), got {final}")
 
 
-def warmup_multistep_factor(
+def warmup_schedule_factor(
     step: int,
     *,
     total_steps: int,
@@ -65,7 +65,7 @@ def warmup_multistep_factor(
     return final + (1.0 - final) * shape
 
 
-def warmup_multistep_optimizers(
+def warmup_schedule_optimizers(
     module: L.LightningModule,
     optimizer_factory: Callable[..., Optimizer],
     *,
@@ -77,11 +77,11 @@ def warmup_multistep_optimizers(
     final: float = 0.0,
 ) -> dict[str, Any]:
     """``configure_optimizers`` result: an optimizer over ``parameters`` with the warm-up
-    schedule of :func:`warmup_multistep_factor` over the trainer's total optimizer steps,
+    schedule of :func:`warmup_schedule_factor` over the trainer's total optimizer steps,
     stepped every step."""
     optimizer = optimizer_factory(params=list(parameters))
     schedule = partial(
-        warmup_multistep_factor,
+        warmup_schedule_factor,
         total_steps=max(int(module.trainer.estimated_stepping_batches), 1),
         warmup_fraction=warmup_fraction,
         milestones=tuple(milestones),

@@ -2,11 +2,11 @@ import math
 
 import pytest
 
-from intermask.utils.schedules import check_lr_decay, warmup_multistep_factor
+from intermask.utils.schedules import check_lr_decay, warmup_schedule_factor
 
 
 def test_vq_schedule_warms_up_over_a_quarter_then_steps_down_twice():
-    factor = lambda step: warmup_multistep_factor(  # noqa: E731
+    factor = lambda step: warmup_schedule_factor(  # noqa: E731
         step, total_steps=1000, warmup_fraction=0.25, milestones=(0.7, 0.85), gamma=0.1
     )
     assert factor(0) == pytest.approx(1 / 250)
@@ -19,7 +19,7 @@ def test_vq_schedule_warms_up_over_a_quarter_then_steps_down_twice():
 
 def test_generator_schedule_divides_by_three_at_each_milestone():
     factors = [
-        warmup_multistep_factor(
+        warmup_schedule_factor(
             s, total_steps=100, warmup_fraction=0.0, milestones=(0.5, 0.7, 0.85), gamma=1 / 3
         )
         for s in (0, 49, 50, 70, 85, 99)
@@ -29,11 +29,11 @@ def test_generator_schedule_divides_by_three_at_each_milestone():
 
 def test_total_steps_must_be_positive():
     with pytest.raises(ValueError, match="total_steps must be positive, got 0"):
-        warmup_multistep_factor(0, total_steps=0, warmup_fraction=0.25, milestones=(), gamma=0.1)
+        warmup_schedule_factor(0, total_steps=0, warmup_fraction=0.25, milestones=(), gamma=0.1)
 
 
 def _smooth(step: int, decay: str, final: float = 0.0) -> float:
-    return warmup_multistep_factor(
+    return warmup_schedule_factor(
         step,
         total_steps=110,
         warmup_fraction=10 / 110,
@@ -86,7 +86,7 @@ def test_decay_settings_that_disagree_are_refused(decay, milestones, final, mess
     with pytest.raises(ValueError, match=message):
         check_lr_decay(decay, milestones, final)
     with pytest.raises(ValueError, match=message):
-        warmup_multistep_factor(
+        warmup_schedule_factor(
             0,
             total_steps=10,
             warmup_fraction=0.0,
@@ -98,7 +98,7 @@ def test_decay_settings_that_disagree_are_refused(decay, milestones, final, mess
 
 
 def test_multistep_ignores_the_floor():
-    factor = warmup_multistep_factor(
+    factor = warmup_schedule_factor(
         9, total_steps=10, warmup_fraction=0.0, milestones=(0.5,), gamma=0.1, final=0.5
     )
     assert factor == pytest.approx(0.1)
