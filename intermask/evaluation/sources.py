@@ -127,7 +127,7 @@ class VQReconstruction(MotionSource):
         real = motion[:, :, :frames]
         flat = rearrange(real, "b p t ... -> (b p) t ...")
         indices = self.vq.encode(flat, lengths.repeat_interleave(2))
-        decoded = rearrange(self.vq.decode(indices.clamp_min(0)), "(b p) t ... -> b p t ...", p=2)
+        decoded = rearrange(self.vq.decode_valid(indices), "(b p) t ... -> b p t ...", p=2)
         predicted_joints = joints_from_features(self.vq, decoded)
         real_joints = joints_from_features(self.vq, real)
         if predicted_joints is not None and real_joints is not None:

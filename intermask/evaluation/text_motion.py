@@ -44,7 +44,7 @@ class SoloReconstruction(VQReconstruction):
         indices = self.vq.encode(real, lengths)
         if self.layers is not None:
             indices = indices[:, : self.layers]
-        decoded = self.vq.decode(indices.clamp_min(0))
+        decoded = self.vq.decode_valid(indices)
         mask = length_mask(lengths, frames)
         predicted, target = self.vq.view.geometry(decoded), self.vq.view.geometry(real)
         if predicted.positions is not None and target.positions is not None:

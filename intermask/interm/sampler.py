@@ -38,14 +38,16 @@ class GeneratedMotion(NamedTuple):
 
 
 def decode_tokens(vq: MotionVQVAE, tokens: torch.Tensor) -> torch.Tensor:
-    """(B, 2, rows, T') codes (-1 on padding) -> (B, 2, 4 T', *F) *normalized* features.
+    """(B, 2, rows, T') codes (-1 on padding) -> (B, 2, 4 T', *F) *normalized* features, 0 on
+    the padding.
 
-    Both persons go through the single-person decoder as one batch of 2B.
+    Both persons go through the single-person decoder as one batch of 2B, each over its own
+    steps (:meth:`~intermask.vq.model.MotionVQVAE.decode_valid`).
     """
     if tokens.ndim != 4 or tokens.shape[1] != 2:
         raise ValueError(f"tokens must be (B, 2, rows, T'), got {tuple(tokens.shape)}")
-    flat = rearrange(tokens.clamp_min(0), "b p r t -> (b p) 1 r t")
-    features = vq.decode(flat)  # (2B, T, *F)
+    flat = rearrange(tokens, "b p r t -> (b p) 1 r t")
+    features = vq.decode_valid(flat)  # (2B, T, *F)
     return rearrange(features, "(b p) t ... -> b p t ...", p=2)
 
 

@@ -361,6 +361,6 @@ class MoMaskSampler:
         """Generate B motions: :meth:`tokens`, then the VQ-VAE decoder."""
         tokens = self.tokens(captions, lengths, generator=generator)
         self.vq.to(self.device)
-        features = self.vq.decode(tokens)
+        features = self.vq.decode_valid(tokens)
         lengths = torch.as_tensor(lengths, device=self.device).long()
         return MoMaskSample(tokens, features, lengths - lengths % FRAMES_PER_STEP)

@@ -99,3 +99,35 @@ class MotionVQVAE(nn.Module):
     def decode(self, indices: torch.Tensor) -> torch.Tensor:
         """(B, Q', rows, T') indices (Q' <= Q layers, -1 = unused) -> (B, 4 T', *F) normalized features."""
         return self.view.from_joints(self.decoder(self.quantizer.lookup(indices)))
+
+    def decode_valid(self, indices: torch.Tensor) -> torch.Tensor:
+        """:meth:`decode` of a padded batch, each sample over its own steps only.
+
+        indices: (B, Q', rows, T'), the base layer -1 on the padding steps at the end of a
+        sample (what :meth:`encode` with lengths and the generators return). Returns (B, 4 T', *F)
+        normalized features, 0 beyond each sample's steps. Decoding the padding too would let the
+        decoder's convolutions carry whatever code stands there into the last valid frames; here
+        a sample decodes as it would alone, whatever batch it is in.
+        """
+        steps = (indices[:, 0, 0] >= 0).sum(-1)  # (B,)
+        valid = length_mask(steps, indices.shape[-1])  # (B, T')
+        if not bool(((indices[:, 0] >= 0) == valid[:, None]).all()):
+            raise ValueError(
+                "decode_valid: the base layer's -1 (padding) must fill the last steps of every "
+                "row of a sample, and nothing before them"
+            )
+        if bool((steps == indices.shape[-1]).all()):
+            return self.decode(indices)
+        features = None
+        for count in steps.unique().tolist():
+            rows = (steps == count).nonzero()[:, 0]
+            if count == 0:
+                continue
+            decoded = self.decode(indices[rows, ..., :count])  # (n, 4 count, *F)
+            if features is None:
+                shape = (indices.shape[0], FRAMES_PER_STEP * indices.shape[-1], *decoded.shape[2:])
+                features = decoded.new_zeros(shape)
+            features[rows, : decoded.shape[1]] = decoded
+        if features is None:
+            raise ValueError("decode_valid: every sample of the batch is padding")
+        return features

@@ -46,6 +46,39 @@ def test_encode_marks_token_steps_beyond_the_length_as_padding():
     assert (tokens[1, ..., :7] >= 0).all() and (tokens[1, ..., 7:] == -1).all()  # 30 // 4 = 7 steps
 
 
+def test_decode_valid_decodes_each_sample_as_it_would_alone():
+    torch.manual_seed(0)
+    model = _interhuman_vq(layers=1)
+    model.train()(torch.randn(4, 64, 262))  # initialise the codebook
+    model.eval()
+    tokens = model.encode(torch.randn(3, 64, 262), lengths=torch.tensor([64, 30, 44]))
+    decoded = model.decode_valid(tokens)
+    assert decoded.shape == (3, 64, 262)
+    for sample, steps in enumerate((16, 7, 11)):
+        alone = model.decode(tokens[sample : sample + 1, ..., :steps])[0]
+        torch.testing.assert_close(decoded[sample, : 4 * steps], alone, rtol=0, atol=1e-6)
+        assert torch.all(decoded[sample, 4 * steps :] == 0)
+    # the old way, the padding decoded as code 0, moves the last valid frames of a short sample
+    padded = model.decode(tokens.clamp_min(0))
+    assert (padded[1, 24:28] - decoded[1, 24:28]).abs().max() > 1e-3
+    # a batch without padding is decoded as one
+    full = tokens[:1].expand(2, -1, -1, -1)
+    torch.testing.assert_close(model.decode_valid(full), model.decode(full), rtol=0, atol=0)
+
+
+def test_decode_valid_refuses_padding_that_is_not_at_the_end():
+    model = _interhuman_vq(layers=1).eval()
+    tokens = model.encode(torch.randn(2, 32, 262))
+    gap = tokens.clone()
+    gap[1, 0, :, 3] = -1
+    with pytest.raises(ValueError, match="must fill the last steps of every row"):
+        model.decode_valid(gap)
+    ragged = tokens.clone()
+    ragged[1, 0, 2, 6:] = -1  # one row of the sample shorter than the others
+    with pytest.raises(ValueError, match="must fill the last steps of every row"):
+        model.decode_valid(ragged)
+
+
 def test_encode_never_updates_the_codebook_even_in_train_mode():
     model = _interhuman_vq()
     features = torch.randn(2, 16, 262)
