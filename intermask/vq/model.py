@@ -120,14 +120,14 @@ class MotionVQVAE(nn.Module):
             return self.decode(indices)
         features = None
         for count in steps.unique().tolist():
-            rows = (steps == count).nonzero()[:, 0]
             if count == 0:
-                continue
-            decoded = self.decode(indices[rows, ..., :count])  # (n, 4 count, *F)
+                continue  # a sample of padding only stays 0
+            members = (steps == count).nonzero()[:, 0]
+            decoded = self.decode(indices[members, ..., :count])  # (n, 4 count, *F)
             if features is None:
                 shape = (indices.shape[0], FRAMES_PER_STEP * indices.shape[-1], *decoded.shape[2:])
                 features = decoded.new_zeros(shape)
-            features[rows, : decoded.shape[1]] = decoded
+            features[members, : decoded.shape[1]] = decoded
         if features is None:
             raise ValueError("decode_valid: every sample of the batch is padding")
         return features

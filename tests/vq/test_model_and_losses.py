@@ -77,6 +77,14 @@ def test_decode_valid_refuses_padding_that_is_not_at_the_end():
     ragged[1, 0, 2, 6:] = -1  # one row of the sample shorter than the others
     with pytest.raises(ValueError, match="must fill the last steps of every row"):
         model.decode_valid(ragged)
+    empty = torch.full_like(tokens, -1)
+    with pytest.raises(ValueError, match="every sample of the batch is padding"):
+        model.decode_valid(empty)
+    one_empty = tokens.clone()
+    one_empty[1] = -1  # a sample of padding only decodes to 0 beside a real one
+    decoded = model.decode_valid(one_empty)
+    torch.testing.assert_close(decoded[0], model.decode(tokens[:1])[0], rtol=0, atol=1e-6)
+    assert torch.all(decoded[1] == 0)
 
 
 def test_encode_never_updates_the_codebook_even_in_train_mode():
