@@ -239,6 +239,10 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
             logger=False,
         )
 
+    def muon_excluded(self) -> list[torch.nn.Parameter]:
+        # the code embedding is looked up and the logits layer scores each code by its own row
+        return [*self.net.token_embedding.parameters(), *self.net.head.logits.parameters()]
+
     @property
     def vq(self) -> MotionVQVAE:
         return self._frozen.vq

@@ -10,6 +10,7 @@ import lightning as L
 import torch
 from torch import nn
 
+from intermask.utils.optim import builds_muon, muon_groups
 from intermask.utils.schedules import warmup_schedule_optimizers
 from intermask.utils.seeds import keyed_generator
 
@@ -100,11 +101,19 @@ class ScheduledModule(L.LightningModule):
         """What the optimizer updates (default: every parameter)."""
         return self.parameters()
 
+    def muon_excluded(self) -> Iterable[nn.Parameter]:
+        """Matrices that take AdamW steps when the optimizer is :class:`~intermask.utils.optim.Muon`
+        (default: the embedding tables); a module adds its output layer."""
+        return [p for m in self.modules() if isinstance(m, nn.Embedding) for p in m.parameters()]
+
     def configure_optimizers(self) -> dict[str, Any]:
+        parameters: Iterable[Any] = self.optimized_parameters()
+        if builds_muon(self.optimizer_factory):
+            parameters = muon_groups(parameters, adamw=self.muon_excluded())
         return warmup_schedule_optimizers(
             self,
             self.optimizer_factory,
-            parameters=self.optimized_parameters(),
+            parameters=parameters,
             warmup_fraction=self.hparams.warmup_fraction,
             milestones=self.hparams.lr_milestones,
             gamma=self.hparams.lr_gamma,

@@ -69,14 +69,15 @@ def warmup_schedule_optimizers(
     module: L.LightningModule,
     optimizer_factory: Callable[..., Optimizer],
     *,
-    parameters: Iterable[nn.Parameter],
+    parameters: Iterable[nn.Parameter] | Iterable[dict[str, Any]],
     warmup_fraction: float,
     milestones: Sequence[float],
     gamma: float,
     decay: str = "multistep",
     final: float = 0.0,
 ) -> dict[str, Any]:
-    """``configure_optimizers`` result: an optimizer over ``parameters`` with the warm-up
+    """``configure_optimizers`` result: an optimizer over ``parameters`` (or parameter groups,
+    every group on the same schedule) with the warm-up
     schedule of :func:`warmup_schedule_factor` over the trainer's total optimizer steps,
     stepped every step."""
     optimizer = optimizer_factory(params=list(parameters))

@@ -64,6 +64,10 @@ class VQVAEModule(ScheduledModule):
         self.val_mpjpe = MPJPE(scale=1000.0)
         self._warned_no_positions = False
 
+    def muon_excluded(self) -> list[torch.nn.Parameter]:
+        # the input layer reads raw features, the output layer writes them
+        return [*self.net.encoder.net[0].parameters(), *self.net.decoder.net[-1].parameters()]
+
     @property
     def checkpoint_metric(self) -> str:
         """What ``monitor: auto`` selects checkpoints by: MPJPE when the representation has

@@ -17,6 +17,7 @@ from intermask.interm.model import InterMTransformer
 from intermask.interm.module import InterMModule, masked_cross_entropy
 from intermask.text import TINY_MODEL_NAME, FrozenCLIPTextEncoder
 from intermask.text.cache import TextFeatureCache
+from intermask.utils.optim import Muon
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.quantizers import ResidualQuantizer
@@ -218,6 +219,32 @@ def test_a_smooth_learning_rate_decay_is_recorded_and_drives_the_optimizer(encod
         ValueError, match="lr_decay must be one of multistep, cosine, linear, got 'exp'"
     ):
         _module(encoder, tmp_path, lr_decay="exp", lr_milestones=[])
+
+
+def test_muon_steps_the_hidden_matrices_and_adamw_the_embedding_logits_and_vectors(
+    encoder, tmp_path
+):
+    module = _module(encoder, tmp_path, optimizer=partial(Muon, lr=2e-3, betas=(0.9, 0.99)))
+    module._trainer = SimpleNamespace(estimated_stepping_batches=8)
+    config = module.configure_optimizers()
+    optimizer, scheduler = config["optimizer"], config["lr_scheduler"]["scheduler"]
+    matrices, others = optimizer.param_groups
+    net = module.net
+    assert matrices["muon"] and not others["muon"]
+    on_muon = {id(p) for p in matrices["params"]}
+    assert id(net.token_projection.weight) in on_muon
+    assert id(net.blocks[0].self_attention.attention.query.weight) in on_muon
+    assert id(net.blocks[0].joint_ffn.modulation.linear.weight) in on_muon
+    on_adamw = {id(p) for p in others["params"]}
+    assert {id(net.token_embedding.weight), id(net.head.logits.weight)} <= on_adamw
+    assert id(net.head.logits.bias) in on_adamw and id(net.text_norm.weight) in on_adamw
+    assert on_muon | on_adamw == {id(p) for p in net.parameters()}
+    assert all(p.ndim == 2 for p in matrices["params"])
+    # the warm-up (a quarter of 8 steps) drives both groups alike
+    assert matrices["lr"] == others["lr"] == pytest.approx(1e-3)
+    optimizer.step()  # no gradients yet: nothing moves
+    scheduler.step()
+    assert matrices["lr"] == others["lr"] == pytest.approx(2e-3)
 
 
 def test_code_vectors_come_from_the_vqs_base_codebook(encoder, tmp_path):
