@@ -107,3 +107,17 @@ def test_momask_defaults_are_the_papers_reading_and_its_switches_are_named():
         "model.loss_kind=smooth_l1",
     ):
         assert switch in table, switch
+
+
+def test_the_papers_optimizer_is_adamw_and_the_cpu_demos_generator_takes_muon():
+    for job, experiment in (("train_gen", "gen_interhuman"), ("train_gen", "gen_interx")):
+        cfg = _compose(job, f"experiment={experiment}", "vq_ckpt=x.ckpt")
+        assert cfg.model.optimizer._target_ == "torch.optim.AdamW"  # appendix C.2
+    for experiment in ("vq_interhuman", "vq_interx", "vq_demo"):
+        cfg = _compose("train_vq", f"experiment={experiment}")
+        assert cfg.model.optimizer._target_ == "torch.optim.AdamW"
+    demo = _compose("train_gen", "experiment=gen_demo", "vq_ckpt=x.ckpt").model.optimizer
+    assert demo._target_ == "intermask.utils.optim.Muon"
+    assert (demo.lr, demo.momentum, list(demo.betas)) == (2.0e-3, 0.95, [0.9, 0.99])
+    table = Path(CONFIG_DIR).parent.joinpath("docs", "fidelity.md").read_text()
+    assert "`model.optimizer._target_: intermask.utils.optim.Muon`" in table
