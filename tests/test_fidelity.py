@@ -118,6 +118,10 @@ def test_the_papers_optimizer_is_adamw_and_the_cpu_demos_generator_takes_muon():
         assert cfg.model.optimizer._target_ == "torch.optim.AdamW"
     demo = _compose("train_gen", "experiment=gen_demo", "vq_ckpt=x.ckpt").model.optimizer
     assert demo._target_ == "intermask.utils.optim.Muon"
-    assert (demo.lr, demo.momentum, list(demo.betas)) == (2.0e-3, 0.95, [0.9, 0.99])
+    assert (demo.lr, list(demo.betas)) == (2.0e-3, [0.9, 0.99])  # Muon's momentum: 0.95
+    for experiment in ("overfit_gen", "gen_synthetic_long", "gen_synthetic_long_cpu"):
+        # built on gen_demo, measured with AdamW (docs/learning.md)
+        cfg = _compose("train_gen", f"experiment={experiment}", "vq_ckpt=x.ckpt")
+        assert cfg.model.optimizer._target_ == "torch.optim.AdamW", experiment
     table = Path(CONFIG_DIR).parent.joinpath("docs", "fidelity.md").read_text()
     assert "`model.optimizer._target_: intermask.utils.optim.Muon`" in table
