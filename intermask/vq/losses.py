@@ -23,6 +23,10 @@ LossKind = Literal["smooth_l1", "l1", "l2"]
 ARM_JOINTS: tuple[int, ...] = tuple(
     JOINT_NAMES.index(name) for name in ("l_elbow", "r_elbow", "l_wrist", "r_wrist")
 )
+# the joints a ``torso`` loss weighs: the upper spine, neck and head, whose lean is a bow's pitch
+TORSO_JOINTS: tuple[int, ...] = tuple(
+    JOINT_NAMES.index(name) for name in ("spine3", "neck", "head")
+)
 
 
 @dataclass(frozen=True)
@@ -40,6 +44,9 @@ class LossWeights:
     # not in the paper (0 = off): the elbows' and wrists' positions relative to the pelvis, so
     # an arm reaching for the partner costs more than its share of the 22-joint position term
     arms: float = 0.0
+    # not in the paper (0 = off): the upper spine's, neck's and head's positions relative to the
+    # pelvis, so a bow's lean (0.2 rad, a head 0.15 m forward) is not within the code error
+    torso: float = 0.0
 
 
 class LossTerms(NamedTuple):
@@ -52,6 +59,7 @@ class LossTerms(NamedTuple):
     foot_contact: torch.Tensor
     commitment: torch.Tensor
     arms: torch.Tensor
+    torso: torch.Tensor
 
 
 def elementwise_loss(
@@ -105,24 +113,19 @@ def vq_losses(
                 rot6d_to_matrix(predicted_geometry.rot6d), rot6d_to_matrix(target_geometry.rot6d)
             )
             geodesic = _masked_mean(angles, frame_mask)  # mean rotation error in radians
-    positions = velocity = bones = foot_contact = arms = zero
+    positions = velocity = bones = foot_contact = arms = torso = zero
     if predicted_geometry.positions is not None and target_geometry.positions is not None:
         predicted, real = predicted_geometry.positions, target_geometry.positions
         positions = _masked_mean(elementwise_loss(predicted, real, kind), frame_mask)
         step_mask = frame_mask[:, 1:] & frame_mask[:, :-1]
         predicted_step, real_step = predicted[:, 1:] - predicted[:, :-1], real[:, 1:] - real[:, :-1]
         velocity = _masked_mean(elementwise_loss(predicted_step, real_step, kind), step_mask)
-        if weights.arms or measure_unweighted:
-            with torch.set_grad_enabled(torch.is_grad_enabled() and bool(weights.arms)):
-                arm = list(ARM_JOINTS)
-                arms = _masked_mean(
-                    elementwise_loss(
-                        predicted[:, :, arm] - predicted[:, :, :1],
-                        real[:, :, arm] - real[:, :, :1],
-                        kind,
-                    ),
-                    frame_mask,
-                )
+        arms = _pelvis_relative(
+            predicted, real, ARM_JOINTS, kind, frame_mask, weights.arms, measure_unweighted
+        )
+        torso = _pelvis_relative(
+            predicted, real, TORSO_JOINTS, kind, frame_mask, weights.torso, measure_unweighted
+        )
         bones = _masked_mean(
             elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
         )
@@ -142,7 +145,42 @@ def vq_losses(
         + weights.foot_contact * foot_contact
         + weights.commitment * commit_loss
         + weights.arms * arms
+        + weights.torso * torso
     )
     return LossTerms(
-        total, reconstruction, positions, velocity, bones, geodesic, foot_contact, commit_loss, arms
+        total,
+        reconstruction,
+        positions,
+        velocity,
+        bones,
+        geodesic,
+        foot_contact,
+        commit_loss,
+        arms,
+        torso,
     )
+
+
+def _pelvis_relative(
+    predicted: torch.Tensor,
+    real: torch.Tensor,
+    joints: tuple[int, ...],
+    kind: LossKind,
+    frame_mask: torch.Tensor,
+    weight: float,
+    measure_unweighted: bool,
+) -> torch.Tensor:
+    """Loss of (B, T, 22, 3) positions of ``joints`` relative to the pelvis; with a weight of 0
+    measured without a graph, and only when ``measure_unweighted`` (else 0)."""
+    if not (weight or measure_unweighted):
+        return predicted.new_zeros(())
+    with torch.set_grad_enabled(torch.is_grad_enabled() and bool(weight)):
+        index = list(joints)
+        return _masked_mean(
+            elementwise_loss(
+                predicted[:, :, index] - predicted[:, :, :1],
+                real[:, :, index] - real[:, :, :1],
+                kind,
+            ),
+            frame_mask,
+        )

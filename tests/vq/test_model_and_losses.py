@@ -5,7 +5,7 @@ import torch
 
 from intermask.motion import interhuman as ih
 from intermask.motion.rotations import matrix_to_rot6d, rot6d_to_matrix, rotation_about_axis
-from intermask.motion.skeleton import REST_OFFSETS
+from intermask.motion.skeleton import JOINT_NAMES, REST_OFFSETS
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
 from intermask.vq.losses import LossWeights, vq_losses
 from intermask.vq.model import MotionVQVAE
@@ -203,6 +203,28 @@ def test_arms_term_measures_elbows_and_wrists_relative_to_the_pelvis():
         off.total.item() + 10.0 * off.arms.item(), rel=1e-5
     )
     assert _losses(view, target, target).arms.item() == 0.0
+
+
+def test_torso_term_measures_the_upper_spine_neck_and_head_relative_to_the_pelvis():
+    view, target = _geometry_pair()
+    prediction = target.clone()
+    positions = prediction[..., ih.POSITIONS].reshape(2, 8, 22, 3)
+    positions[..., :, 2] -= 0.3  # the whole body moved: nothing changes relative to the pelvis
+    positions[..., JOINT_NAMES.index("head"), 2] += 0.06  # the head 6 cm forward: a bow
+    positions[..., JOINT_NAMES.index("r_wrist"), 1] += 0.02  # an arm joint: not the torso's
+    prediction[..., ih.POSITIONS] = positions.flatten(-2)
+    off = _losses(view, prediction, target, kind="l1")
+    # one joint of the three torso joints, one axis of three
+    assert off.torso.item() == pytest.approx(0.06 / 9, rel=1e-4)
+    assert off.arms.item() == pytest.approx(0.02 / 12, rel=1e-4)
+    assert not off.torso.requires_grad  # weight 0: measured without a graph
+    weighted = _losses(view, prediction, target, kind="l1", weights=LossWeights(torso=20.0))
+    assert weighted.total.item() == pytest.approx(
+        off.total.item() + 20.0 * off.torso.item(), rel=1e-5
+    )
+    skipped = _losses(view, prediction, target, kind="l1", measure_unweighted=False)
+    assert (skipped.torso.item(), skipped.arms.item()) == (0.0, 0.0)
+    assert _losses(view, target, target).torso.item() == 0.0
 
 
 def test_foot_contact_penalises_sliding_planted_feet_only():
