@@ -16,6 +16,7 @@ from intermask.interm.decoding import generate
 from intermask.metrics.fid import FID
 from intermask.metrics.retrieval import MMDist, RPrecision
 from intermask.train import train
+from intermask.utils.optim import Muon
 
 pytestmark = pytest.mark.gpu
 
@@ -122,8 +123,39 @@ def test_the_metrics_on_cuda_equal_the_cpu_ones():
     assert 0.5 < values[0][3] <= 1.0  # the texts are noisy copies of their motions
 
 
-def test_train_gen_runs_on_one_gpu_in_bf16(synthetic_interhuman_root, vq_checkpoint, tmp_path):  # noqa: F811
-    cfg = _gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path)
+def test_muon_steps_on_cuda_equal_the_cpu_ones():
+    """Newton-Schulz, the batched shapes and the AdamW groups give the CPU's weights on CUDA."""
+    generator = torch.Generator().manual_seed(0)
+    shapes = [(64, 32), (64, 32), (32, 64), (16, 8, 3, 3), (64,)]  # two of one shape: one batch
+    start = [torch.randn(shape, generator=generator) for shape in shapes]
+    grads = [[torch.randn(shape, generator=generator) for shape in shapes] for _ in range(3)]
+    weights = {}
+    for device in ("cpu", "cuda"):
+        params = [torch.nn.Parameter(w.clone().to(device)) for w in start]
+        optimizer = Muon(
+            [{"params": params[:4], "muon": True}, {"params": params[4:], "muon": False}],
+            lr=0.02,
+            weight_decay=0.1,
+        )
+        for step in grads:
+            for param, grad in zip(params, step, strict=True):
+                param.grad = grad.to(device)
+            optimizer.step()
+        weights[device] = [p.detach().cpu() for p in params]
+    for before, cpu, cuda in zip(start, weights["cpu"], weights["cuda"], strict=True):
+        assert (cpu - before).abs().max() > 1e-3  # three steps moved every weight
+        torch.testing.assert_close(cuda, cpu, atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("optimizer", ["torch.optim.AdamW", "intermask.utils.optim.Muon"])
+def test_train_gen_runs_on_one_gpu_in_bf16(
+    synthetic_interhuman_root,
+    vq_checkpoint,  # noqa: F811
+    tmp_path,
+    optimizer,
+):
+    extra = (f"model.optimizer._target_={optimizer}",)
+    cfg = _gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path, extra=extra)
     from omegaconf import open_dict
 
     with open_dict(cfg):
