@@ -240,8 +240,8 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         )
 
     def muon_excluded(self) -> list[torch.nn.Parameter]:
-        # the code embedding is looked up and the logits layer scores each code by its own row
-        return [*self.net.token_embedding.parameters(), *self.net.head.logits.parameters()]
+        # beside the code embedding, the logits layer: it scores each code by its own row
+        return [*super().muon_excluded(), *self.net.head.logits.parameters()]
 
     @property
     def vq(self) -> MotionVQVAE:

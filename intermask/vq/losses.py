@@ -7,6 +7,7 @@ normalized values, which mixes per-dimension scales into a geometric quantity; w
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
@@ -98,21 +99,25 @@ def vq_losses(
 
     prediction, target: (B, T, *F) normalized features; reconstruction_mask: (*F) bool;
     frame_mask: (B, T) bool, False on padding; geometries from the representation view.
-    Terms whose geometry is missing (Inter-X without a body model) are 0. With a geodesic weight
-    of 0 the geodesic term is measured without a graph, and only when ``measure_unweighted``
-    (else 0): on CPU it costs ~12% of a demo step for nothing the optimizer uses.
+    Terms whose geometry is missing (Inter-X without a body model) are 0. A geodesic, arms or
+    torso term of weight 0 is measured without a graph, and only when ``measure_unweighted``
+    (else 0): the geodesic costs ~12% of a CPU demo step for nothing the optimizer uses.
     """
     zero = prediction.new_zeros(())
     reconstruction = _masked_mean(
         elementwise_loss(prediction, target, kind)[..., reconstruction_mask], frame_mask
     )
-    geodesic = zero
-    if weights.geodesic or measure_unweighted:
-        with torch.set_grad_enabled(torch.is_grad_enabled() and bool(weights.geodesic)):
-            angles = geodesic_angle(
+    geodesic = _measured(  # mean rotation error in radians
+        weights.geodesic,
+        measure_unweighted,
+        zero,
+        lambda: _masked_mean(
+            geodesic_angle(
                 rot6d_to_matrix(predicted_geometry.rot6d), rot6d_to_matrix(target_geometry.rot6d)
-            )
-            geodesic = _masked_mean(angles, frame_mask)  # mean rotation error in radians
+            ),
+            frame_mask,
+        ),
+    )
     positions = velocity = bones = foot_contact = arms = torso = zero
     if predicted_geometry.positions is not None and target_geometry.positions is not None:
         predicted, real = predicted_geometry.positions, target_geometry.positions
@@ -120,11 +125,17 @@ def vq_losses(
         step_mask = frame_mask[:, 1:] & frame_mask[:, :-1]
         predicted_step, real_step = predicted[:, 1:] - predicted[:, :-1], real[:, 1:] - real[:, :-1]
         velocity = _masked_mean(elementwise_loss(predicted_step, real_step, kind), step_mask)
-        arms = _pelvis_relative(
-            predicted, real, ARM_JOINTS, kind, frame_mask, weights.arms, measure_unweighted
+        arms = _measured(
+            weights.arms,
+            measure_unweighted,
+            zero,
+            lambda: _pelvis_relative(predicted, real, ARM_JOINTS, kind, frame_mask),
         )
-        torso = _pelvis_relative(
-            predicted, real, TORSO_JOINTS, kind, frame_mask, weights.torso, measure_unweighted
+        torso = _measured(
+            weights.torso,
+            measure_unweighted,
+            zero,
+            lambda: _pelvis_relative(predicted, real, TORSO_JOINTS, kind, frame_mask),
         )
         bones = _masked_mean(
             elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
@@ -161,26 +172,29 @@ def vq_losses(
     )
 
 
+def _measured(
+    weight: float, measure_unweighted: bool, zero: torch.Tensor, term: Callable[[], torch.Tensor]
+) -> torch.Tensor:
+    """``term()`` with a graph when ``weight`` is not 0; without one when it is 0 and
+    ``measure_unweighted`` (a logged value only); else ``zero``, not computed at all."""
+    if not (weight or measure_unweighted):
+        return zero
+    with torch.set_grad_enabled(torch.is_grad_enabled() and bool(weight)):
+        return term()
+
+
 def _pelvis_relative(
     predicted: torch.Tensor,
     real: torch.Tensor,
     joints: tuple[int, ...],
     kind: LossKind,
     frame_mask: torch.Tensor,
-    weight: float,
-    measure_unweighted: bool,
 ) -> torch.Tensor:
-    """Loss of (B, T, 22, 3) positions of ``joints`` relative to the pelvis; with a weight of 0
-    measured without a graph, and only when ``measure_unweighted`` (else 0)."""
-    if not (weight or measure_unweighted):
-        return predicted.new_zeros(())
-    with torch.set_grad_enabled(torch.is_grad_enabled() and bool(weight)):
-        index = list(joints)
-        return _masked_mean(
-            elementwise_loss(
-                predicted[:, :, index] - predicted[:, :, :1],
-                real[:, :, index] - real[:, :, :1],
-                kind,
-            ),
-            frame_mask,
-        )
+    """Loss of the (B, T, 22, 3) positions of ``joints`` relative to the pelvis."""
+    index = list(joints)
+    return _masked_mean(
+        elementwise_loss(
+            predicted[:, :, index] - predicted[:, :, :1], real[:, :, index] - real[:, :, :1], kind
+        ),
+        frame_mask,
+    )

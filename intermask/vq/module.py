@@ -66,7 +66,11 @@ class VQVAEModule(ScheduledModule):
 
     def muon_excluded(self) -> list[torch.nn.Parameter]:
         # the input layer reads raw features, the output layer writes them
-        return [*self.net.encoder.net[0].parameters(), *self.net.decoder.net[-1].parameters()]
+        return [
+            *super().muon_excluded(),
+            *self.net.encoder.net[0].parameters(),
+            *self.net.decoder.net[-1].parameters(),
+        ]
 
     @property
     def checkpoint_metric(self) -> str:
