@@ -11,6 +11,7 @@ from typing import Any
 
 import hydra
 import lightning as L
+import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf, open_dict
 
@@ -53,6 +54,19 @@ def decide_precision(cfg: DictConfig) -> PrecisionChoice:
     # e.g. "precision: 32-true (CPU capability AVX2, no native bf16)"
     log.info("precision: %s (%s)", choice.precision, choice.reason)
     return choice
+
+
+def set_threads(cfg: DictConfig) -> int:
+    """Apply the job's ``threads`` (torch's intra-op CPU threads; null keeps torch's default)
+    and return the count in effect. Small networks can run faster on fewer threads than cores:
+    their matmuls are too small to share, and a data worker needs a core of its own."""
+    threads = cfg.get("threads")
+    if threads is not None:
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+            raise ValueError(f"threads must be a positive integer or null, got {threads!r}")
+        torch.set_num_threads(threads)
+    log.info("CPU threads: %d", torch.get_num_threads())
+    return torch.get_num_threads()
 
 
 def resume_checkpoint(ckpt_path: str | None, *, allow_remote: bool = False) -> str | None:
@@ -160,6 +174,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     non_finite = non_finite_policy(cfg)  # settings are checked before any data is read
     output_dir = Path(cfg.paths.output_dir)
     precision = decide_precision(cfg)
+    set_threads(cfg)
     datamodule = instantiate(cfg.data)
     # bad data fails here, in seconds, before the model (text tower, VQ checkpoint) is built; the
     # datamodule keeps what it read, so fit does not read it again

@@ -7,7 +7,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import open_dict
 
-from intermask.train import CONFIG_DIR, decide_precision
+from intermask.train import CONFIG_DIR, decide_precision, set_threads
 from intermask.utils.precision import resolve_precision
 
 AVX2_FLAGS = {"architecture": "x86_64", "avx2": True, "avx512_bf16": False, "amx_bf16": False}
@@ -115,3 +115,46 @@ def test_train_job_keeps_an_explicit_value(cpu_only, caplog):
         decide_precision(cfg)
     assert cfg.trainer.precision == "bf16-mixed"
     assert "precision: bf16-mixed (set explicitly)" in caplog.text
+
+
+@pytest.fixture
+def keep_threads():
+    previous = torch.get_num_threads()
+    yield
+    torch.set_num_threads(previous)
+
+
+def test_train_job_sets_its_threads_and_logs_them(keep_threads, caplog):
+    cfg = _train_config(["threads=1"])
+    with caplog.at_level("INFO", logger="intermask.train"):
+        assert set_threads(cfg) == 1
+    assert torch.get_num_threads() == 1
+    assert "CPU threads: 1" in caplog.text
+
+
+def test_train_job_without_threads_keeps_torchs_count(keep_threads):
+    torch.set_num_threads(2)
+    assert set_threads(_train_config([])) == 2
+    assert torch.get_num_threads() == 2
+
+
+@pytest.mark.parametrize("value", ["0", "-2", "true", "1.5", "two"])
+def test_train_job_refuses_a_thread_count_that_is_not_a_positive_integer(keep_threads, value):
+    cfg = _train_config([f"threads={value}"])
+    with pytest.raises(ValueError, match="threads must be a positive integer or null, got"):
+        set_threads(cfg)
+
+
+@pytest.mark.parametrize(
+    ("job", "experiment", "threads"),
+    [
+        ("train_vq", "vq_demo", None),
+        ("train_evaluator", "evaluator_demo", 1),  # faster on 1 of 2 cores (docs/performance.md)
+        ("train_gen", "gen_demo", None),
+        ("train_arflow", "arflow_demo", None),
+    ],
+)
+def test_demo_experiments_thread_counts(job, experiment, threads):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose(job, overrides=[f"experiment={experiment}"])
+    assert cfg.threads == threads
