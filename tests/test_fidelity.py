@@ -123,6 +123,9 @@ def test_the_papers_optimizer_is_adamw_and_the_cpu_demos_generator_takes_muon():
         # built on gen_demo, measured with AdamW (docs/learning.md)
         cfg = _compose("train_gen", f"experiment={experiment}", "vq_ckpt=x.ckpt")
         assert cfg.model.optimizer._target_ == "torch.optim.AdamW", experiment
+    for experiment in ("overfit_gen", "gen_synthetic_long_cpu"):  # and at width 128, not 64
+        net = _compose("train_gen", f"experiment={experiment}", "vq_ckpt=x.ckpt").model.net
+        assert (net.width, net.ff, net.token_embed_dim) == (128, 256, 128), experiment
     table = Path(CONFIG_DIR).parent.joinpath("docs", "fidelity.md").read_text()
     assert "`model.optimizer._target_: intermask.utils.optim.Muon`" in table
 
