@@ -65,8 +65,9 @@ def set_threads(cfg: DictConfig) -> int:
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
             raise ValueError(f"threads must be a positive integer or null, got {threads!r}")
         torch.set_num_threads(threads)
-    log.info("CPU threads: %d", torch.get_num_threads())
-    return torch.get_num_threads()
+    threads = torch.get_num_threads()
+    log.info("CPU threads: %d", threads)
+    return threads
 
 
 def resume_checkpoint(ckpt_path: str | None, *, allow_remote: bool = False) -> str | None:
