@@ -13,7 +13,8 @@ row                       what is timed
                           size), counted FLOPs (``torch.utils.flop_counter``)
 ``interaction``           one whole interaction per batch size (20 iterations, CFG 2 in one
                           doubled forward, top-k, VQ decode of both persons): per-sample time;
-                          the best batch is marked
+                          the best batch is marked. On CUDA the passes replay CUDA graphs
+                          (``--no-cuda-graphs``: eager); FLOPs are counted on an eager run
 ``interm_train_step``     an Inter-M optimizer step (masking, BERT corruption, step unroll,
                           AdamW) at batch 4 on 300-frame crops, VQ encoding included (no token
                           cache): samples/s and the step's peak memory
@@ -51,6 +52,7 @@ from intermask.config_files import config_dir
 from intermask.data.common import read_id_list
 from intermask.evaluation.protocol import ProtocolConstants
 from intermask.interm.decoding import generate
+from intermask.interm.graphs import GraphedForward
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.interm.module import InterMModule
 from intermask.interm.sampler import decode_tokens
@@ -258,6 +260,7 @@ def bench(
     vq_batch: int = 32,
     test_split: Path | None = Path("data/InterHuman/split/test.txt"),
     precision: str = "auto",
+    cuda_graphs: bool = True,
     log: Callable[[str], None] = print,
 ) -> Report:
     dev = torch.device(device)
@@ -265,7 +268,9 @@ def bench(
     choice = bench_precision(precision, dev)
     bf16 = choice.precision == BF16
     peak = matmul_peak(dev, dtype=torch.bfloat16 if bf16 else torch.float32)
-    report = Report(SCHEMA, size, {**machine_record(dev), "precision": choice.precision}, peak)
+    graphs = cuda_graphs and dev.type == "cuda"
+    machine = {**machine_record(dev), "precision": choice.precision, "cuda_graphs": graphs}
+    report = Report(SCHEMA, size, machine, peak)
     log(
         f"peak: {peak:.1f} GFLOP/s ({report.machine['cpu']}, {threads} threads); "
         f"precision {choice.precision} ({choice.reason})"
@@ -275,7 +280,7 @@ def bench(
         _rows(
             report, size, dev, log,
             frames=frames, batches=batches, repeats=repeats, train_batch=train_batch,
-            vq_batch=vq_batch, test_split=test_split,
+            vq_batch=vq_batch, test_split=test_split, cuda_graphs=graphs,
         )  # fmt: skip
     return report
 
@@ -303,6 +308,7 @@ def _rows(
     train_batch: int,
     vq_batch: int,
     test_split: Path | None,
+    cuda_graphs: bool = False,
 ) -> None:
     """Measure every row into ``report`` (its peak is the yardstick of ``% peak``)."""
     threads, peak = torch.get_num_threads(), report.peak_gflops
@@ -335,20 +341,21 @@ def _rows(
         )
     )
 
-    # whole interactions per batch size
+    # whole interactions per batch size; the graphs outlive a call, as in the protocol
+    graphed = GraphedForward(net, enabled=cuda_graphs)
     rows = []
     for batch in batches:
         text = _text(net, batch, dev)
         lengths = torch.full((batch,), steps, device=dev)
 
         @torch.no_grad()
-        def interaction(text=text, lengths=lengths, batch=batch) -> None:
-            codes = generate(net, text, lengths, seeds=list(range(batch)))
+        def interaction(text=text, lengths=lengths, batch=batch, forward=graphed) -> None:
+            codes = generate(net, text, lengths, seeds=list(range(batch)), forward=forward)
             decode_tokens(vq, codes)
 
         with FlopCounterMode(display=False) as counter:
-            interaction()
-        wall, cpu = _timed(interaction, dev, max(1, repeats // 2), warm=True)
+            interaction(forward=None)  # eager: a replayed graph runs no countable operator
+        wall, cpu = _timed(interaction, dev, max(1, repeats // 2))  # its warm-up captures
         rows.append(
             Row(
                 "interaction",
@@ -494,6 +501,12 @@ def main(argv: list[str] | None = None) -> int:
         help="auto: the trainer's choice for the device (bf16 autocast on CUDA and on CPUs with "
         "native bf16, fp32 elsewhere)",
     )
+    parser.add_argument(
+        "--cuda-graphs",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="CUDA: replay the decoding passes as CUDA graphs (the protocol's default)",
+    )
     parser.add_argument("--out", type=Path, default=Path("outputs/bench"))
     args = parser.parse_args(argv)
     if args.threads is not None:
@@ -508,6 +521,7 @@ def main(argv: list[str] | None = None) -> int:
         vq_batch=args.vq_batch,
         test_split=args.test_split,
         precision=args.precision,
+        cuda_graphs=args.cuda_graphs,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"bench_{args.size}_{report.machine['device'].replace(':', '')}_{report.machine['threads']}t.json"

@@ -156,6 +156,7 @@ def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Mo
         vq=generator.vq.to(device),
         text=generator.text,
         **OmegaConf.to_container(cfg.sampler),
+        cuda_graphs=cfg.cuda_graphs,
     )
     generator.text.encoder.to(device)
     if cfg.mode == "interaction":

@@ -243,8 +243,11 @@ def test_the_generate_command_reaches_the_logits_through_each_module_once(
     for stack in paths:
         modules = [p.relative_to(package).as_posix() for p in stack if p.is_relative_to(package)]
         visits = [m for i, m in enumerate(modules) if i == 0 or modules[i - 1] != m]
-        # the recording stands in for interm/model.py's forward, the next and last stop
-        assert visits == ["cli.py", "generate.py", "interm/sampler.py", "interm/decoding.py"]
+        # the recording stands in for interm/model.py's forward, the next and last stop; on a
+        # CPU the graphed forward runs it eagerly
+        assert visits == [
+            "cli.py", "generate.py", "interm/sampler.py", "interm/decoding.py", "interm/graphs.py"
+        ]  # fmt: skip
 
 
 def test_the_generate_job_runs_from_python_as_from_the_command_line(runs, tmp_path):

@@ -90,6 +90,32 @@ def test_a_seeded_generation_on_cuda_repeats_and_does_not_depend_on_the_batch(de
     assert int(first[1, ..., :steps].max()) < gpu.net.codebook_size
 
 
+@pytest.mark.parametrize("precision", ["fp32", "bf16"])
+def test_decoding_through_cuda_graphs_gives_the_eager_tokens(demo_models, precision):
+    """The graphed passes replay the eager kernels: the same tokens, in every decoding mode,
+    from the second call on with no new capture."""
+    from intermask.interm.graphs import GraphedForward
+
+    _, (_, gpu) = demo_models
+    (_, _), text, lengths = _inputs(gpu.net, 3, 24, CUDA)
+    graphed = GraphedForward(gpu.net)
+    settings = [
+        {"iterations": 6},
+        {"iterations": 3, "persons": "in_turn", "revisits": 1, "partner_scale": 1.0},
+    ]
+    with torch.autocast("cuda", dtype=torch.bfloat16, enabled=precision == "bf16"):
+        for kwargs in settings:
+            eager = generate(gpu.net, text, lengths, seeds=[0, 1, 2], **kwargs)
+            for _ in range(2):
+                assert torch.equal(
+                    generate(gpu.net, text, lengths, seeds=[0, 1, 2], forward=graphed, **kwargs),
+                    eager,
+                )
+    assert graphed.failure is None
+    # one graph per batch shape: guided (2B) and partner-guided (3B)
+    assert graphed.captured == 2
+
+
 def test_the_vq_round_trip_on_cuda_equals_the_cpu_one(demo_models):
     (cpu, _), (gpu, _) = demo_models
     generator = torch.Generator().manual_seed(5)

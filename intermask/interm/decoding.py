@@ -42,7 +42,7 @@ from typing import NamedTuple
 import torch
 
 from intermask.interm.masking import cosine_schedule, lowest_ranks, scheduled_count
-from intermask.interm.model import InterMTransformer, TextFeatures
+from intermask.interm.model import InterMOutput, InterMTransformer, TextFeatures
 from intermask.interm.tokens import step_padding_mask
 
 ITERATIONS = 20  # I, interaction generation (section 3.3); reaction: 12 (paper), 10 (reference)
@@ -57,6 +57,10 @@ PERSONS = "together"  # "together" (section 3.3: both persons each pass) or "in_
 PERSON_ORDERS = ("together", "in_turn")
 REVISITS = 0  # in-turn decoding: later turns that re-decode one person given the other
 PARTNER_SCALE = 0.0  # partner guidance: g in ``+ g * (cond - cond with the partner hidden)``
+
+
+# a drop-in for InterMTransformer.forward_with_condition(tokens_a, tokens_b, condition, lengths)
+Forward = Callable[[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor], InterMOutput]
 
 
 class Edit(NamedTuple):
@@ -106,15 +110,19 @@ def guided_logits(
     null: torch.Tensor,
     lengths_in_steps: torch.Tensor,
     cfg_scale: float,
+    *,
+    forward: Forward | None = None,
 ) -> torch.Tensor:
     """One forward pass -> (B, 2, rows, T', K) logits ``uncond + s * (cond - uncond)``.
 
     Without a condition, or with ``s = 1``, the batch is not doubled: the null or the
-    conditional logits are returned as they are.
+    conditional logits are returned as they are. ``forward`` replaces
+    ``model.forward_with_condition`` (e.g. :class:`~intermask.interm.graphs.GraphedForward`).
     """
+    forward = forward or model.forward_with_condition
 
     def run(a, b, c, lengths):
-        out = model.forward_with_condition(a, b, c, lengths)
+        out = forward(a, b, c, lengths)
         return torch.stack([out.logits_a, out.logits_b], dim=1)
 
     return _guided(run, (tokens[:, 0], tokens[:, 1]), condition, null, lengths_in_steps, cfg_scale)
@@ -150,6 +158,8 @@ def partner_guided_logits(
     lengths_in_steps: torch.Tensor,
     cfg_scale: float,
     partner_scale: float,
+    *,
+    forward: Forward | None = None,
 ) -> torch.Tensor:
     """:func:`guided_logits` plus partner guidance, in one forward pass of a tripled batch
     (doubled without text guidance):
@@ -159,14 +169,16 @@ def partner_guided_logits(
     The model knows both predictions: interaction masking trains a person beside its visible
     partner, solo masking beside a wholly masked one. Their difference is what the partner adds,
     and ``g > 0`` follows it further, as text guidance follows the text (docs/learning.md,
-    thirteenth pass). Without a condition, ``cond`` is the null prediction.
+    thirteenth pass). Without a condition, ``cond`` is the null prediction. ``forward`` as in
+    :func:`guided_logits`.
     """
+    forward = forward or model.forward_with_condition
     conditional = null if condition is None else condition
     text_guided = _text_guided(condition, cfg_scale)
     hidden = tokens.masked_fill(partner, model.vocabulary.mask_id)
     maps = torch.cat([tokens, hidden, tokens] if text_guided else [tokens, hidden])
     conditions = [conditional, conditional, null] if text_guided else [conditional, conditional]
-    out = model.forward_with_condition(
+    out = forward(
         maps[:, 0],
         maps[:, 1],
         torch.cat(conditions),
@@ -203,10 +215,12 @@ def sample_codes(
     if temperature == 0:
         return logits.argmax(dim=-1)
     uniform = torch.full_like(logits, 0.5)
+    lengths = lengths_in_steps.tolist()  # one read-back for the batch, not one per sample
+    drawing = [True] * len(generators) if active is None else active.tolist()
     for b, generator in enumerate(generators):
-        if active is not None and not bool(active[b]):
+        if not drawing[b]:
             continue
-        length = int(lengths_in_steps[b])
+        length = lengths[b]
         shape = (*logits.shape[1:-2], length, logits.shape[-1])
         uniform[b, ..., :length, :] = torch.rand(shape, generator=generator, device=logits.device)
     gumbel = -torch.log(-torch.log(uniform.clamp(1e-20, 1 - 1e-7)))
@@ -281,6 +295,7 @@ class _Settings(NamedTuple):
     schedule: str = SCHEDULE
     noise: str = NOISE
     partner_scale: float = PARTNER_SCALE
+    forward: Forward | None = None  # None: model.forward_with_condition
 
 
 def _sample(
@@ -363,6 +378,7 @@ def _decode_collaborative(
                 settings.lengths_in_steps,
                 settings.cfg_scale,
                 settings.partner_scale,
+                forward=settings.forward,
             )
         else:
             logits = guided_logits(
@@ -372,6 +388,7 @@ def _decode_collaborative(
                 settings.null,
                 settings.lengths_in_steps,
                 settings.cfg_scale,
+                forward=settings.forward,
             )
         sampled, confidence = _sample(logits, settings)
         tokens = torch.where(undecided, sampled, tokens)
@@ -435,6 +452,7 @@ def generate(
     persons: str = PERSONS,
     revisits: int = REVISITS,
     partner_scale: float = PARTNER_SCALE,
+    forward: Forward | None = None,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -474,6 +492,10 @@ def generate(
             the first (B's turn and every revisit; the first too where an edit fixes some of
             B's tokens), and reaction generation (B beside the fixed A). Each such pass runs
             one more copy of the batch. 0 (the paper) is plain guidance.
+        forward: what runs the collaborative passes in place of ``model.forward_with_condition``
+            (same arguments and result), e.g. a :class:`~intermask.interm.graphs.GraphedForward`
+            that keeps its CUDA graphs from one call to the next. Alternative modeling's passes
+            stay eager.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
@@ -533,6 +555,7 @@ def generate(
             schedule,
             noise,
             partner_scale,
+            forward,
         )
         if model.modeling == "alternative":
             tokens = _decode_alternative(model, tokens, undecided, iterations, settings)

@@ -25,6 +25,7 @@ from intermask.interm.decoding import (
     Edit,
     generate,
 )
+from intermask.interm.graphs import GraphedForward
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.text.cache import TextFeatureCache
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
@@ -81,7 +82,9 @@ class InteractionSampler:
 
     ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise``,
     ``persons``, ``revisits`` and ``partner_scale`` default to the paper's inference settings
-    (section 3.3, appendix C.1).
+    (section 3.3, appendix C.1). ``cuda_graphs``: on a CUDA device, each shape of decoding pass
+    is captured once as a CUDA graph and replayed (:mod:`intermask.interm.graphs`; the same
+    kernels, so the same tokens); it does nothing elsewhere.
     """
 
     def __init__(
@@ -99,8 +102,10 @@ class InteractionSampler:
         persons: str = PERSONS,
         revisits: int = REVISITS,
         partner_scale: float = PARTNER_SCALE,
+        cuda_graphs: bool = True,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
+        self.forward = GraphedForward(net, enabled=cuda_graphs)
         self.iterations, self.cfg_scale = iterations, cfg_scale
         self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
         self.noise, self.persons, self.revisits = noise, persons, revisits
@@ -156,6 +161,7 @@ class InteractionSampler:
             seeds=seeds,
             reference_tokens=reference_tokens,
             edit=edit,
+            forward=self.forward,
         )
         normalized = decode_tokens(self.vq, tokens)
         joints = joints_from_features(self.vq, normalized)

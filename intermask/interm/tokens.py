@@ -9,6 +9,9 @@ one [SEP] token, then person B's map flattened the same way, ``2N + 1`` tokens w
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -18,6 +21,21 @@ from einops import rearrange
 from intermask.motion.masks import length_mask
 
 CODEBOOK_SIZE = 1024  # |C|, paper appendix C.1
+
+# Whether the sequence builders check their inputs' values. A check reads a tensor back to the
+# host, which a CUDA graph cannot capture; the graphed forward checks its inputs eagerly first.
+_CHECKED: ContextVar[bool] = ContextVar("intermask_checked_tokens", default=True)
+
+
+@contextmanager
+def unchecked_tokens() -> Iterator[None]:
+    """Skip the value checks of :func:`step_padding_mask` and :func:`build_sequence` (their
+    shape checks stay): for a CUDA graph capture of inputs already checked eagerly."""
+    token = _CHECKED.set(False)
+    try:
+        yield
+    finally:
+        _CHECKED.reset(token)
 
 
 @dataclass(frozen=True)
@@ -54,7 +72,7 @@ def step_padding_mask(lengths_in_steps: torch.Tensor, steps: int) -> torch.Tenso
         raise ValueError(
             f"lengths_in_steps must be (B,), got shape {tuple(lengths_in_steps.shape)}"
         )
-    if bool(((lengths_in_steps < 0) | (lengths_in_steps > steps)).any()):
+    if _CHECKED.get() and bool(((lengths_in_steps < 0) | (lengths_in_steps > steps)).any()):
         raise ValueError(
             f"lengths_in_steps must lie in [0, {steps}], got {lengths_in_steps.tolist()}"
         )
@@ -80,7 +98,7 @@ def build_sequence(
             f"{tuple(tokens_a.shape)} and {tuple(tokens_b.shape)}"
         )
     tokens = torch.stack([tokens_a, tokens_b], dim=1).long()  # (B, 2, rows, T')
-    if bool(((tokens < -1) | (tokens > vocabulary.pad_id)).any()):
+    if _CHECKED.get() and bool(((tokens < -1) | (tokens > vocabulary.pad_id)).any()):
         raise ValueError(
             f"tokens must be -1, a code in [0, {codebook_size}), [MASK]={vocabulary.mask_id} or "
             f"[PAD]={vocabulary.pad_id}; got values in [{int(tokens.min())}, {int(tokens.max())}]"

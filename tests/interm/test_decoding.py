@@ -360,10 +360,10 @@ def test_partner_guidance_runs_where_one_person_is_decoded_beside_the_other(coup
 
     original = decoding.partner_guided_logits
 
-    def partnered(model, tokens, partner, *args):
+    def partnered(model, tokens, partner, *args, **kwargs):
         hidden_persons.append(tuple(bool(partner[:, p].any()) for p in (0, 1)))
         assert not bool((tokens[partner] == mask).any())  # only finished codes are hidden
-        return original(model, tokens, partner, *args)
+        return original(model, tokens, partner, *args, **kwargs)
 
     monkeypatch.setattr(model, "forward_with_condition", recording)
     monkeypatch.setattr(decoding, "partner_guided_logits", partnered)
