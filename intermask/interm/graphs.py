@@ -12,11 +12,17 @@ shapes, dtypes, autocast state and parameter storage is run eagerly twice (which
 tokens), then captured; later calls copy their inputs into the captured buffers and replay. Off a
 CUDA device, and wherever capture fails, it runs the eager forward (a failed capture is logged
 once and not retried).
+
+``compile=True`` (opt-in) captures ``torch.compile(forward_with_condition)`` instead: fused
+kernels, a compilation per input shape (about 100 s for the paper network on an H200), and logits
+that differ from the eager ones in the last bits, so results are not bitwise the eager ones
+(docs/performance.md).
 """
 
 from __future__ import annotations
 
 import logging
+from contextlib import ExitStack
 from typing import NamedTuple
 
 import torch
@@ -50,8 +56,13 @@ class GraphedForward:
     model (dropout) or a grad-enabled call runs eagerly. ``failure`` says why a capture failed
     (None while none has)."""
 
-    def __init__(self, model: InterMTransformer, *, enabled: bool = True) -> None:
-        self.model, self.enabled = model, enabled
+    def __init__(
+        self, model: InterMTransformer, *, enabled: bool = True, compile: bool = False
+    ) -> None:
+        self.model, self.enabled, self.compile = model, enabled, compile
+        self._run = model.forward_with_condition
+        if compile:
+            self._run = torch.compile(model.forward_with_condition, dynamic=False)
         self._graphs: dict[tuple, _Captured] = {}
         self._pool = None  # one memory pool for every shape: passes replay one at a time
         self.failure: str | None = None
@@ -93,26 +104,34 @@ class GraphedForward:
 
     def _capture(self, key: tuple, inputs: tuple[torch.Tensor, ...]) -> _Captured | None:
         static = tuple(t.clone() for t in inputs)
-        autocast = torch.is_autocast_enabled("cuda")
-        dtype = torch.get_autocast_dtype("cuda")
-        side = torch.cuda.Stream(device=static[0].device)
-        side.wait_stream(torch.cuda.current_stream(static[0].device))
+        device = static[0].device
+        autocast, dtype = torch.is_autocast_enabled("cuda"), torch.get_autocast_dtype("cuda")
+
+        def unchecked_uncached():
+            # autocast's cast cache must be off while capturing: cached casts would be freed
+            # after the capture while the graph still reads them. The warm-up runs under the
+            # same state, so that a compiled forward is not recompiled inside the capture.
+            stack = ExitStack()
+            stack.enter_context(unchecked_tokens())
+            stack.enter_context(
+                torch.autocast("cuda", dtype=dtype, enabled=autocast, cache_enabled=False)
+            )
+            return stack
+
+        side = torch.cuda.Stream(device=device)
+        side.wait_stream(torch.cuda.current_stream(device))
         try:
             with torch.cuda.stream(side):
-                for _ in range(WARMUP_PASSES):
-                    self._eager(*static)  # checked: the inputs are valid tokens and lengths
-            torch.cuda.current_stream(static[0].device).wait_stream(side)
+                self._eager(*static)  # checked: the inputs are valid tokens and lengths
+                with unchecked_uncached():
+                    for _ in range(WARMUP_PASSES):
+                        self._run(*static)  # compiles, when compiling
+            torch.cuda.current_stream(device).wait_stream(side)
             if self._pool is None:
                 self._pool = torch.cuda.graph_pool_handle()
             graph = torch.cuda.CUDAGraph()
-            # autocast's cast cache must be off while capturing: cached casts would be freed
-            # after the capture while the graph still reads them
-            with (
-                unchecked_tokens(),
-                torch.autocast("cuda", dtype=dtype, enabled=autocast, cache_enabled=False),
-                torch.cuda.graph(graph, pool=self._pool),
-            ):
-                output = self._eager(*static)
+            with unchecked_uncached(), torch.cuda.graph(graph, pool=self._pool):
+                output = self._run(*static)
         except RuntimeError as error:  # an op that cannot be captured: stay eager from now on
             self.failure = f"{type(error).__name__}: {error}"
             log.warning("CUDA graph capture failed, decoding eagerly: %s", self.failure)
