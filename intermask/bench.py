@@ -261,7 +261,6 @@ def bench(
     test_split: Path | None = Path("data/InterHuman/split/test.txt"),
     precision: str = "auto",
     cuda_graphs: bool = True,
-    compile: bool = False,
     log: Callable[[str], None] = print,
 ) -> Report:
     dev = torch.device(device)
@@ -274,7 +273,6 @@ def bench(
         **machine_record(dev),
         "precision": choice.precision,
         "cuda_graphs": graphs,
-        "compiled_forward": graphs and compile,
     }
     report = Report(SCHEMA, size, machine, peak)
     log(
@@ -287,7 +285,6 @@ def bench(
             report, size, dev, log,
             frames=frames, batches=batches, repeats=repeats, train_batch=train_batch,
             vq_batch=vq_batch, test_split=test_split, cuda_graphs=graphs,
-            compile=graphs and compile,
         )  # fmt: skip
     return report
 
@@ -316,7 +313,6 @@ def _rows(
     vq_batch: int,
     test_split: Path | None,
     cuda_graphs: bool = False,
-    compile: bool = False,
 ) -> None:
     """Measure every row into ``report`` (its peak is the yardstick of ``% peak``)."""
     threads, peak = torch.get_num_threads(), report.peak_gflops
@@ -350,7 +346,7 @@ def _rows(
     )
 
     # whole interactions per batch size; the graphs outlive a call, as in the protocol
-    graphed = GraphedForward(net, enabled=cuda_graphs, compile=compile)
+    graphed = GraphedForward(net, enabled=cuda_graphs)
     rows = []
     for batch in batches:
         text = _text(net, batch, dev)
@@ -515,11 +511,6 @@ def main(argv: list[str] | None = None) -> int:
         default=True,
         help="CUDA: replay the decoding passes as CUDA graphs (the protocol's default)",
     )
-    parser.add_argument(
-        "--compile",
-        action="store_true",
-        help="CUDA graphs of torch.compile'd passes (opt-in: not bitwise the eager numbers)",
-    )
     parser.add_argument("--out", type=Path, default=Path("outputs/bench"))
     args = parser.parse_args(argv)
     if args.threads is not None:
@@ -535,7 +526,6 @@ def main(argv: list[str] | None = None) -> int:
         test_split=args.test_split,
         precision=args.precision,
         cuda_graphs=args.cuda_graphs,
-        compile=args.compile,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"bench_{args.size}_{report.machine['device'].replace(':', '')}_{report.machine['threads']}t.json"

@@ -8,15 +8,10 @@ host's work goes.
 
 :class:`GraphedForward` is a drop-in for ``InterMTransformer.forward_with_condition`` that
 :func:`~intermask.interm.decoding.generate` takes as ``forward``. Each new combination of input
-shapes, dtypes, autocast state and parameter storage is run eagerly twice (which also checks the
-tokens), then captured; later calls copy their inputs into the captured buffers and replay. Off a
+shapes, dtypes, autocast state and parameter storage is run eagerly, once with the token checks
+and twice more as it will be captured, then captured; later calls copy their inputs into the captured buffers and replay. Off a
 CUDA device, and wherever capture fails, it runs the eager forward (a failed capture is logged
 once and not retried).
-
-``compile=True`` (opt-in) captures ``torch.compile(forward_with_condition)`` instead: fused
-kernels, a compilation per input shape (about 100 s for the paper network on an H200), and logits
-that differ from the eager ones in the last bits, so results are not bitwise the eager ones
-(docs/performance.md).
 """
 
 from __future__ import annotations
@@ -32,7 +27,7 @@ from intermask.interm.tokens import unchecked_tokens
 
 log = logging.getLogger(__name__)
 
-WARMUP_PASSES = 2  # eager passes on a side stream before capture (cuBLAS and allocator warm-up)
+WARMUP_PASSES = 2  # unchecked eager passes on a side stream before capture (cuBLAS, allocator)
 
 
 class _Captured(NamedTuple):
@@ -56,13 +51,8 @@ class GraphedForward:
     model (dropout) or a grad-enabled call runs eagerly. ``failure`` says why a capture failed
     (None while none has)."""
 
-    def __init__(
-        self, model: InterMTransformer, *, enabled: bool = True, compile: bool = False
-    ) -> None:
-        self.model, self.enabled, self.compile = model, enabled, compile
-        self._run = model.forward_with_condition
-        if compile:
-            self._run = torch.compile(model.forward_with_condition, dynamic=False)
+    def __init__(self, model: InterMTransformer, *, enabled: bool = True) -> None:
+        self.model, self.enabled = model, enabled
         self._graphs: dict[tuple, _Captured] = {}
         self._pool = None  # one memory pool for every shape: passes replay one at a time
         self.failure: str | None = None
@@ -72,7 +62,7 @@ class GraphedForward:
         """How many input signatures have a graph."""
         return len(self._graphs)
 
-    def _eager(self, *inputs: torch.Tensor) -> InterMOutput:
+    def _forward(self, *inputs: torch.Tensor) -> InterMOutput:
         return self.model.forward_with_condition(*inputs)
 
     def __call__(
@@ -90,13 +80,13 @@ class GraphedForward:
             or self.model.training
             or torch.is_grad_enabled()
         ):
-            return self._eager(*inputs)
+            return self._forward(*inputs)
         key = _signature(inputs, self.model)
         captured = self._graphs.get(key)
         if captured is None:
             captured = self._capture(key, inputs)
             if captured is None:
-                return self._eager(*inputs)
+                return self._forward(*inputs)
         for static, value in zip(captured.inputs, inputs, strict=True):
             static.copy_(value)
         captured.graph.replay()
@@ -109,8 +99,7 @@ class GraphedForward:
 
         def unchecked_uncached():
             # autocast's cast cache must be off while capturing: cached casts would be freed
-            # after the capture while the graph still reads them. The warm-up runs under the
-            # same state, so that a compiled forward is not recompiled inside the capture.
+            # after the capture while the graph still reads them. The warm-up runs as captured.
             stack = ExitStack()
             stack.enter_context(unchecked_tokens())
             stack.enter_context(
@@ -122,16 +111,16 @@ class GraphedForward:
         side.wait_stream(torch.cuda.current_stream(device))
         try:
             with torch.cuda.stream(side):
-                self._eager(*static)  # checked: the inputs are valid tokens and lengths
+                self._forward(*static)  # checked: the inputs are valid tokens and lengths
                 with unchecked_uncached():
                     for _ in range(WARMUP_PASSES):
-                        self._run(*static)  # compiles, when compiling
+                        self._forward(*static)
             torch.cuda.current_stream(device).wait_stream(side)
             if self._pool is None:
                 self._pool = torch.cuda.graph_pool_handle()
             graph = torch.cuda.CUDAGraph()
             with unchecked_uncached(), torch.cuda.graph(graph, pool=self._pool):
-                output = self._run(*static)
+                output = self._forward(*static)
         except RuntimeError as error:  # an op that cannot be captured: stay eager from now on
             self.failure = f"{type(error).__name__}: {error}"
             log.warning("CUDA graph capture failed, decoding eagerly: %s", self.failure)
