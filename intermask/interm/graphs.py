@@ -9,9 +9,9 @@ host's work goes.
 :class:`GraphedForward` is a drop-in for ``InterMTransformer.forward_with_condition`` that
 :func:`~intermask.interm.decoding.generate` takes as ``forward``. Each new combination of input
 shapes, dtypes, autocast state and parameter storage is run eagerly, once with the token checks
-and twice more as it will be captured, then captured; later calls copy their inputs into the captured buffers and replay. Off a
-CUDA device, and wherever capture fails, it runs the eager forward (a failed capture is logged
-once and not retried).
+and twice more as it will be captured, then captured; later calls copy their inputs into the
+captured buffers and replay. Off a CUDA device, and wherever capture fails, it runs the eager
+forward (a failed capture is logged once and not retried).
 """
 
 from __future__ import annotations
