@@ -44,7 +44,7 @@ def test_generate_and_eval_compose_the_library_defaults():
         demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
     assert dict(paper.sampler) == LIBRARY
     # the demo's changes: persons in turn, 5 iterations each, a weaker guidance (docs/learning.md,
-    # ninth pass) and one revisit of both persons (eleventh pass)
+    # ninth pass) and one revisit, of person A given B (eleventh pass)
     assert dict(demo.sampler) == {
         **LIBRARY,
         "iterations": 5,
