@@ -13,7 +13,13 @@ import numpy as np
 import pytest
 import torch
 
-from intermask.data.synthetic import ACTIONS, assign_splits, generate_clip, generate_dataset
+from intermask.data.synthetic import (
+    ACTIONS,
+    assign_splits,
+    default_workers,
+    generate_clip,
+    generate_dataset,
+)
 from intermask.data.synthetic.writers import interhuman_raw
 from intermask.motion.rotations import matrix_to_rot6d
 
@@ -185,6 +191,30 @@ def test_splits_follow_the_fractions() -> None:
         assign_splits(2, 0, (0.8, 0.1, 0.1))
 
 
+def _tree(root: Path) -> dict[str, bytes]:
+    return {
+        str(f.relative_to(root)): f.read_bytes() for f in sorted(root.rglob("*")) if f.is_file()
+    }
+
+
+def test_worker_processes_write_the_same_bytes(tmp_path: Path) -> None:
+    # Both layouts share the clip pool; a small dataset keeps the two spawned workers' start-up
+    # the test's main cost.
+    for workers in (1, 2):
+        generate_dataset(
+            tmp_path / str(workers), format="interx", clips=6, seed=SEED, workers=workers
+        )
+    assert _tree(tmp_path / "2") == _tree(tmp_path / "1") and len(_tree(tmp_path / "1")) > 6
+
+
+def test_default_workers_need_enough_clips_and_fork(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
+    monkeypatch.setattr("multiprocessing.get_all_start_methods", lambda: ["fork", "spawn"])
+    assert [default_workers(n) for n in (3, 199, 200, 400, 1000, 5000)] == [1, 1, 1, 2, 4, 4]
+    monkeypatch.setattr("multiprocessing.get_all_start_methods", lambda: ["spawn", "fork"])
+    assert default_workers(5000) == 1  # spawned workers would re-import the caller's script
+
+
 def test_bad_arguments_and_foreign_folders(tmp_path: Path) -> None:
     with pytest.raises(
         ValueError, match=r"format must be one of \('interhuman', 'interx'\), got 'bvh'"
@@ -192,6 +222,8 @@ def test_bad_arguments_and_foreign_folders(tmp_path: Path) -> None:
         generate_dataset(tmp_path / "a", format="bvh", clips=5, seed=0)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="clips must be between 3"):
         generate_dataset(tmp_path / "a", format="interx", clips=2, seed=0)
+    with pytest.raises(ValueError, match="workers must be at least 1, got 0"):
+        generate_dataset(tmp_path / "a", format="interx", clips=5, seed=0, workers=0)
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("mine")

@@ -12,6 +12,10 @@ seed=S)`` writes the actor of each clip as a single-person dataset in the HumanM
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,6 +48,9 @@ __all__ = [
 
 GENERATOR_VERSION = META_FORMAT
 MAX_CLIPS = 999_000  # Inter-X names hold the clip index in three 3-digit fields
+# A worker process costs its start-up (importing torch and the caller's main module, seconds),
+# so smaller datasets are generated in-process (one clip takes ~0.1 s on one core).
+CLIPS_PER_WORKER = 200
 
 
 @dataclass(frozen=True)
@@ -80,36 +87,53 @@ def _readme(*, format: str, clips: int, seed: int, split_sizes: dict[str, int]) 
     )
 
 
+def default_workers(clips: int) -> int:
+    """Processes :func:`generate_dataset` uses by default: one per usable core where processes
+    start by fork (Linux), none for fewer than ``CLIPS_PER_WORKER`` clips each. Elsewhere a
+    spawned worker would import the caller's main module again, so the default stays in-process."""
+    if multiprocessing.get_all_start_methods()[0] != "fork":
+        return 1
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity call on this platform
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, clips // CLIPS_PER_WORKER))
+
+
 def generate_dataset(
     out: Path | str,
     format: DatasetKind,
     clips: int,
     seed: int,
     split_fractions: tuple[float, float, float] = (0.8, 0.1, 0.1),
+    workers: int | None = None,
 ) -> SynthSummary:
     """Write `clips` synthetic clips under `out` in the official `format` layout.
 
     `out` must be empty, missing, or hold an earlier synthetic dataset (which is replaced).
     Inter-X clips use the template body for both people: that layout stores rotations and a root
-    translation only, so readers rebuild joints with the template offsets.
+    translation only, so readers rebuild joints with the template offsets. `workers` processes
+    generate the clips (None: :func:`default_workers`; see :func:`_clips` for how they start);
+    every clip depends on (seed, index) only, so the bytes written are the same for any number.
     """
     check_dataset_kind(format, name="format")
     if not 3 <= clips <= MAX_CLIPS:
         raise ValueError(f"clips must be between 3 and {MAX_CLIPS}, got {clips}")
+    workers = default_workers(clips) if workers is None else workers
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
     out = Path(out)
     splits = assign_splits(clips, seed, split_fractions)
     actions = assign_actions(clips, seed)
     prepare_folder(out)
     writer = InterHumanWriter(out) if format == "interhuman" else InterXWriter(out)
+    jobs = [(seed, index, action, format == "interhuman") for index, action in enumerate(actions)]
     threads = torch.get_num_threads()
     # Every tensor here is tiny ((T, 22, 3, 3) at most): intra-op threads only add overhead, up to
     # 10x on a busy 2-core machine. The caller's setting is restored afterwards.
     torch.set_num_threads(1)
     try:
-        for index, (action, split) in enumerate(zip(actions, splits, strict=True)):
-            clip = generate_clip(
-                seed=seed, index=index, action=action, vary_bodies=format == "interhuman"
-            )
+        for index, (clip, split) in enumerate(zip(_clips(jobs, workers), splits, strict=True)):
             writer.add(index=index, clip=clip, split=split)
     finally:
         torch.set_num_threads(threads)
@@ -127,3 +151,27 @@ def generate_dataset(
         split_sizes=split_sizes,
         action_counts=counts,
     )
+
+
+def _one_thread() -> None:
+    torch.set_num_threads(1)
+
+
+def _clip(job: tuple[int, int, str, bool]) -> SynthClip:
+    seed, index, action, vary_bodies = job
+    return generate_clip(seed=seed, index=index, action=action, vary_bodies=vary_bodies)
+
+
+def _clips(jobs: list[tuple[int, int, str, bool]], workers: int) -> Iterator[SynthClip]:
+    """The clips of ``jobs`` in order, from ``workers`` processes (1: this one). Workers are forked
+    where the platform can, as PyTorch's data loader workers are; spawned workers (macOS,
+    Windows) import the caller's main module, which then needs an ``if __name__ == "__main__"``
+    guard."""
+    if workers == 1:
+        yield from map(_clip, jobs)
+        return
+    fork = "fork" in multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("fork" if fork else "spawn")
+    chunk = max(1, len(jobs) // (4 * workers))
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_one_thread) as pool:
+        yield from pool.map(_clip, jobs, chunksize=chunk)
