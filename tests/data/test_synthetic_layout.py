@@ -198,7 +198,7 @@ def _tree(root: Path) -> dict[str, bytes]:
 
 
 def test_worker_processes_write_the_same_bytes(tmp_path: Path) -> None:
-    # Both layouts share the clip pool; a small dataset keeps the two spawned workers' start-up
+    # Both layouts share the clip pool; a small dataset keeps the two workers' start-up
     # the test's main cost.
     for workers in (1, 2):
         generate_dataset(
