@@ -21,6 +21,7 @@ from pathlib import Path
 
 import torch
 
+from intermask.data.common import single_threaded
 from intermask.data.synthetic.clips import ACTIONS, CONTACT_ACTIONS, SynthClip, generate_clip
 from intermask.data.synthetic.humanml3d import HumanML3DSummary, generate_humanml3d
 from intermask.data.synthetic.planning import assign_actions, assign_splits, prepare_folder
@@ -91,7 +92,7 @@ def default_workers(clips: int) -> int:
     """Processes :func:`generate_dataset` uses by default: one per usable core where processes
     start by fork (Linux), none for fewer than ``CLIPS_PER_WORKER`` clips each. Elsewhere a
     spawned worker would import the caller's main module again, so the default stays in-process."""
-    if multiprocessing.get_all_start_methods()[0] != "fork":
+    if not _forks():
         return 1
     try:
         cores = len(os.sched_getaffinity(0))
@@ -128,15 +129,13 @@ def generate_dataset(
     prepare_folder(out)
     writer = InterHumanWriter(out) if format == "interhuman" else InterXWriter(out)
     jobs = [(seed, index, action, format == "interhuman") for index, action in enumerate(actions)]
-    threads = torch.get_num_threads()
     # Every tensor here is tiny ((T, 22, 3, 3) at most): intra-op threads only add overhead, up to
     # 10x on a busy 2-core machine. The caller's setting is restored afterwards.
-    torch.set_num_threads(1)
     try:
-        for index, (clip, split) in enumerate(zip(_clips(jobs, workers), splits, strict=True)):
-            writer.add(index=index, clip=clip, split=split)
+        with single_threaded():
+            for index, (clip, split) in enumerate(zip(_clips(jobs, workers), splits, strict=True)):
+                writer.add(index=index, clip=clip, split=split)
     finally:
-        torch.set_num_threads(threads)
         writer.close(ACTIONS)
     split_sizes = {split: splits.count(split) for split in SPLITS}
     (out / "README.txt").write_text(
@@ -151,6 +150,11 @@ def generate_dataset(
         split_sizes=split_sizes,
         action_counts=counts,
     )
+
+
+def _forks() -> bool:
+    """Whether new processes start by fork on this platform by default (Linux)."""
+    return multiprocessing.get_all_start_methods()[0] == "fork"
 
 
 def _one_thread() -> None:
@@ -170,8 +174,7 @@ def _clips(jobs: list[tuple[int, int, str, bool]], workers: int) -> Iterator[Syn
     if workers == 1:
         yield from map(_clip, jobs)
         return
-    fork = multiprocessing.get_all_start_methods()[0] == "fork"
-    context = multiprocessing.get_context("fork" if fork else "spawn")
+    context = multiprocessing.get_context("fork" if _forks() else "spawn")
     chunk = max(1, len(jobs) // (4 * workers))
     with ProcessPoolExecutor(workers, mp_context=context, initializer=_one_thread) as pool:
         yield from pool.map(_clip, jobs, chunksize=chunk)
