@@ -24,10 +24,11 @@ Item modes:
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections import defaultdict
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -133,6 +134,26 @@ def body_to_raw(body: torch.Tensor) -> torch.Tensor:
     raw[..., RAW_POSITIONS] = body[..., :n_pos]
     raw[..., RAW_ROTATIONS] = body[..., n_pos:]
     return raw
+
+
+def pair_features(body: torch.Tensor, *, mirror: bool = False, swap: bool = False) -> torch.Tensor:
+    """(..., T, 2, 192) body columns of both persons -> (..., T-1, 2, 262) features, person 1
+    (person 2 when ``swap``) the canonical reference and the other one in its frame."""
+    first, second = (1, 0) if swap else (0, 1)
+    raw = body_to_raw(body)
+    return interaction_features(raw[..., first, :], raw[..., second, :], mirror=mirror)
+
+
+class Crop(NamedTuple):
+    """An interaction item's random choices (:meth:`InterHumanDataset._draw_crop`)."""
+
+    clip: int
+    mirrored: bool
+    start: int  # first frame
+    frames: int  # frames cropped (the features have one fewer)
+    swap_reference: bool  # person 2 is the canonical reference
+    swap_output: bool  # person 2 comes first in the item
+    caption: str
 
 
 class InterHumanDataset(ClipReader):
@@ -271,10 +292,8 @@ class InterHumanDataset(ClipReader):
         """
         body = self.clip_body(clip)
         stop = len(body) if frames is None else start + frames
-        first, second = (1, 0) if swap else (0, 1)
         with single_threaded():
-            raw = body_to_raw(body[start:stop])
-            return interaction_features(raw[:, first], raw[:, second], mirror=mirror)
+            return pair_features(body[start:stop], mirror=mirror, swap=swap)
 
     # ------------------------------------------------------------------ items
 
@@ -302,7 +321,8 @@ class InterHumanDataset(ClipReader):
             "start": start,
         }
 
-    def _interaction_item(self, index: int, rng: np.random.Generator) -> dict[str, Any]:
+    def _draw_crop(self, index: int, rng: np.random.Generator) -> Crop:
+        """The random choices of item ``index``, in the order the generator draws them."""
         clip, mirrored = index % len(self.clip_ids), index >= len(self.clip_ids)
         frames = int(self.frames[clip])
         # Any start in [0, T - max_length]; the reference's range() leaves out the last one.
@@ -313,15 +333,52 @@ class InterHumanDataset(ClipReader):
         swap_output = self.swap_persons and bool(rng.random() < 0.5)
         captions = self.mirrored_captions[clip] if mirrored else self.captions[clip]
         caption = captions[int(rng.integers(len(captions)))]
-        features = self.clip_features(
+        return Crop(
             clip,
-            mirror=mirrored,
-            swap=swap_reference,
-            start=start,
-            frames=min(frames, self.max_length),
-        )  # (L, 2, 262)
-        persons = [2, 1] if swap_reference else [1, 2]
-        if swap_output:
+            mirrored,
+            start,
+            min(frames, self.max_length),
+            swap_reference,
+            swap_output,
+            caption,
+        )
+
+    def _crop_features(self, crops: Sequence[Crop]) -> list[torch.Tensor]:
+        """Un-normalized (frames - 1, 2, 262) features of each crop, as :meth:`clip_features`
+        gives them, computed in one pass per group of crops that share a length and a mirror
+        state (the reference person first in each): a batch of 16 items costs about what four
+        single items do."""
+        groups: dict[tuple[int, bool], list[int]] = defaultdict(list)
+        for i, crop in enumerate(crops):
+            groups[(crop.frames, crop.mirrored)].append(i)
+        features: list[torch.Tensor] = [torch.empty(0)] * len(crops)
+        for (frames, mirrored), members in groups.items():
+            body = torch.stack([self._crop_body(crops[i], frames) for i in members])
+            for i, row in zip(members, pair_features(body, mirror=mirrored), strict=True):
+                features[i] = row
+        return features
+
+    def _crop_body(self, crop: Crop, frames: int) -> torch.Tensor:
+        """(frames, 2, 192) body columns of a crop, its reference person first."""
+        body = self.clip_body(crop.clip)[crop.start : crop.start + frames]
+        return body.flip(1) if crop.swap_reference else body
+
+    def _interaction_item(self, index: int, rng: np.random.Generator) -> dict[str, Any]:
+        return self._interaction_items([(index, rng)])[0]
+
+    def _interaction_items(
+        self, draws: Sequence[tuple[int, np.random.Generator]]
+    ) -> list[dict[str, Any]]:
+        crops = [self._draw_crop(index, rng) for index, rng in draws]
+        return [
+            self._assemble(crop, features)
+            for crop, features in zip(crops, self._crop_features(crops), strict=True)
+        ]
+
+    def _assemble(self, crop: Crop, features: torch.Tensor) -> dict[str, Any]:
+        """The item of ``crop`` from its un-normalized (L, 2, 262) features."""
+        persons = [2, 1] if crop.swap_reference else [1, 2]
+        if crop.swap_output:
             features, persons = features.flip(1), persons[::-1]
         features = self._normalize(features)
         length = features.shape[0]
@@ -330,15 +387,15 @@ class InterHumanDataset(ClipReader):
         item: dict[str, Any] = {
             "motion": motion,
             "length": length,
-            "caption": caption,
-            "id": self.clip_ids[clip],
-            "mirrored": mirrored,
+            "caption": crop.caption,
+            "id": self.clip_ids[crop.clip],
+            "mirrored": crop.mirrored,
             "persons": torch.tensor(persons),
-            "start": start,
-            "reference": 2 if swap_reference else 1,
+            "start": crop.start,
+            "reference": 2 if crop.swap_reference else 1,
         }
         if self.meta is not None:
-            meta = self.meta[clip]
+            meta = self.meta[crop.clip]
             item.update(
                 action=meta.action, action_id=meta.action_id, actor=persons.index(meta.actor) + 1
             )

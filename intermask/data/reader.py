@@ -156,10 +156,25 @@ class ClipReader(Dataset, ABC):
         return self._interaction_count()
 
     def __getitem__(self, key: ItemKey) -> dict[str, Any]:
-        index, epoch = split_key(key, self.epoch)
-        if not 0 <= index < len(self):
-            raise IndexError(f"index {index} out of range for {len(self)} items")
+        return self.__getitems__([key])[0]
+
+    def __getitems__(self, keys: Sequence[ItemKey]) -> list[dict[str, Any]]:
+        """The items of ``keys``, equal to ``[self[key] for key in keys]``. A DataLoader fetches
+        each batch through this, so a reader can do a batch's work in one pass
+        (:meth:`_interaction_items`)."""
+        pairs = [split_key(key, self.epoch) for key in keys]
+        for index, _ in pairs:
+            if not 0 <= index < len(self):
+                raise IndexError(f"index {index} out of range for {len(self)} items")
         with single_threaded():
             if self.mode == "window":
-                return self._window_item(index)
-            return self._interaction_item(index, item_rng(self.seed, epoch, index))
+                return [self._window_item(index) for index, _ in pairs]
+            draws = [(index, item_rng(self.seed, epoch, index)) for index, epoch in pairs]
+            return self._interaction_items(draws)
+
+    def _interaction_items(
+        self, draws: Sequence[tuple[int, np.random.Generator]]
+    ) -> list[dict[str, Any]]:
+        """Interaction items of ``(index, generator)`` pairs, one at a time; a reader whose items
+        share work overrides this to batch it."""
+        return [self._interaction_item(index, rng) for index, rng in draws]

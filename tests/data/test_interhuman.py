@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import torch
 from builders import CAPTIONS, write_interhuman
+from torch.utils.data import DataLoader
 
 from intermask.data.captions import swap_left_right
 from intermask.data.interhuman import InterHumanDataset
@@ -139,6 +140,46 @@ def test_mirror_doubles_items_and_swaps_caption_words(root):
     expected = mirror_features(ds.clip_features(clip))
     got = ds[clip + n]["motion"][:, :39].transpose(0, 1)
     assert torch.allclose(got, expected, atol=1e-5)
+
+
+def test_a_batch_is_its_items_computed_one_at_a_time(root):
+    """``__getitems__`` (what a DataLoader calls) groups the crops of a batch by length and mirror
+    state and computes each group's features in one pass: bit for bit the items of ``ds[key]``,
+    and those are the clip's features over the item's own crop and reference person."""
+    rng = np.random.default_rng(1)
+    norm = Normalizer(rng.normal(size=262), rng.uniform(0.5, 2, size=262))
+    ds = InterHumanDataset(root=root, split="train", mirror=True, normalizer=norm)
+    keys = [(index, epoch) for epoch in (0, 5) for index in range(len(ds))]
+    batch = ds.__getitems__(keys)
+    assert len({(it["length"], it["mirrored"]) for it in batch}) >= 6  # several groups
+    assert {it["reference"] for it in batch} == {1, 2}
+    for key, item in zip(keys, batch, strict=True):
+        alone = ds[key]
+        assert item.keys() == alone.keys()
+        for field, value in item.items():
+            same = (
+                torch.equal(value, alone[field])
+                if torch.is_tensor(value)
+                else value == alone[field]
+            )
+            assert same, (key, field)
+        clip = ds.clip_ids.index(item["id"])
+        crop = ds.clip_features(
+            clip,
+            mirror=item["mirrored"],
+            swap=item["reference"] == 2,
+            start=item["start"],
+            frames=item["length"] + 1,
+        )
+        if item["persons"][0] != item["reference"]:  # the item's first person is not the reference
+            crop = crop.flip(1)
+        expected = norm.normalize(crop).transpose(0, 1)
+        assert torch.equal(item["motion"][:, : item["length"]], expected), key
+    loader = DataLoader(ds, batch_size=len(keys), sampler=keys)  # fetched through __getitems__
+    collated = next(iter(loader))
+    assert torch.equal(collated["motion"], torch.stack([it["motion"] for it in batch]))
+    with pytest.raises(IndexError, match=f"index {len(ds)} out of range for {len(ds)} items"):
+        ds.__getitems__([0, len(ds)])
 
 
 def test_normalized_items(root, train):
