@@ -8,6 +8,10 @@ A reader reads one split of one release layout at construction and serves two ki
 - ``mode="window"``: fixed-length windows of one person (or of both with
   ``window_persons=2``), ``stride`` frames apart, over every whole clip, for VQ training.
 
+A DataLoader fetches a batch through ``__getitems__``, which equals the items one by one; a
+reader whose items share work (InterHuman: one feature pass per group of crops of one length and
+mirror state) does it once per batch there.
+
 What differs between releases (files, features, crop rules, augmentation) lives in the
 subclasses; the class attributes below are what the DataModule and the statistics read instead
 of dispatching on the dataset's name.
