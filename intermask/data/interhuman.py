@@ -346,8 +346,8 @@ class InterHumanDataset(ClipReader):
     def _crop_features(self, crops: Sequence[Crop]) -> list[torch.Tensor]:
         """Un-normalized (frames - 1, 2, 262) features of each crop, as :meth:`clip_features`
         gives them, computed in one pass per group of crops that share a length and a mirror
-        state (the reference person first in each): a batch of 16 items costs about what four
-        single items do."""
+        state (the reference person first in each): a batch of 16 costs about half of what its
+        items cost one at a time (docs/performance.md)."""
         groups: dict[tuple[int, bool], list[int]] = defaultdict(list)
         for i, crop in enumerate(crops):
             groups[(crop.frames, crop.mirrored)].append(i)
