@@ -136,12 +136,16 @@ def body_to_raw(body: torch.Tensor) -> torch.Tensor:
     return raw
 
 
-def pair_features(body: torch.Tensor, *, mirror: bool = False, swap: bool = False) -> torch.Tensor:
-    """(..., T, 2, 192) body columns of both persons -> (..., T-1, 2, 262) features, person 1
-    (person 2 when ``swap``) the canonical reference and the other one in its frame."""
-    first, second = (1, 0) if swap else (0, 1)
+def pair_features(body: torch.Tensor, *, mirror: bool = False) -> torch.Tensor:
+    """(..., T, 2, 192) body columns of both persons -> (..., T-1, 2, 262) features, the first
+    person the canonical reference and the second one in its frame."""
     raw = body_to_raw(body)
-    return interaction_features(raw[..., first, :], raw[..., second, :], mirror=mirror)
+    return interaction_features(raw[..., 0, :], raw[..., 1, :], mirror=mirror)
+
+
+def _reference_first(body: torch.Tensor, swap: bool) -> torch.Tensor:
+    """(..., T, 2, 192) in file order -> person 2 first when ``swap`` (person 2 is the reference)."""
+    return body.flip(-2) if swap else body
 
 
 class Crop(NamedTuple):
@@ -293,7 +297,7 @@ class InterHumanDataset(ClipReader):
         body = self.clip_body(clip)
         stop = len(body) if frames is None else start + frames
         with single_threaded():
-            return pair_features(body[start:stop], mirror=mirror, swap=swap)
+            return pair_features(_reference_first(body[start:stop], swap), mirror=mirror)
 
     # ------------------------------------------------------------------ items
 
@@ -352,16 +356,16 @@ class InterHumanDataset(ClipReader):
         for i, crop in enumerate(crops):
             groups[(crop.frames, crop.mirrored)].append(i)
         features: list[torch.Tensor] = [torch.empty(0)] * len(crops)
-        for (frames, mirrored), members in groups.items():
-            body = torch.stack([self._crop_body(crops[i], frames) for i in members])
+        for (_, mirrored), members in groups.items():
+            body = torch.stack([self._crop_body(crops[i]) for i in members])
             for i, row in zip(members, pair_features(body, mirror=mirrored), strict=True):
                 features[i] = row
         return features
 
-    def _crop_body(self, crop: Crop, frames: int) -> torch.Tensor:
+    def _crop_body(self, crop: Crop) -> torch.Tensor:
         """(frames, 2, 192) body columns of a crop, its reference person first."""
-        body = self.clip_body(crop.clip)[crop.start : crop.start + frames]
-        return body.flip(1) if crop.swap_reference else body
+        body = self.clip_body(crop.clip)[crop.start : crop.start + crop.frames]
+        return _reference_first(body, crop.swap_reference)
 
     def _interaction_item(self, index: int, rng: np.random.Generator) -> dict[str, Any]:
         return self._interaction_items([(index, rng)])[0]
