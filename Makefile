@@ -105,7 +105,7 @@ DEMO_PROMPTS := --text "One person reaches out their right hand and the other pe
 	--text "With both hands, someone pushes another person, who stumbles back."
 # the table's decoding (configs/experiment/eval_demo.yaml), at the length gen_demo trains on (96
 # frames): 4 s would ask it to extrapolate
-DEMO_DECODING := --seconds 3.2 --persons in_turn --revisits 1 --iterations 5 --cfg-scale 1.5
+DEMO_DECODING := --seconds 3.2 --persons in_turn --revisits 2 --iterations 5 --cfg-scale 1.5 --remask-noise 2
 
 demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator, VQ-VAE, generator, protocol, samples (replaces DEMO_DIR)
 	rm -rf $(DEMO_DIR)

@@ -257,6 +257,12 @@ def _add_generate_parser(commands) -> None:
         help="in_turn or --reaction: partner guidance, how much further a person follows what "
         "the other's tokens add to its prediction (0, the paper)",
     )
+    parser.add_argument(
+        "--remask-noise",
+        type=_non_negative_float,
+        help="re-mask by log confidence plus Gumbel noise of this scale, fading over the "
+        "iterations (MaskGIT; 0, the paper)",
+    )
     parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
     parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")
     parser.add_argument(

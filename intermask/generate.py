@@ -39,6 +39,7 @@ from intermask.interm.decoding import (
     NOISE,
     PARTNER_SCALE,
     PERSONS,
+    REMASK_NOISE,
     REVISITS,
     SCHEDULE,
     TEMPERATURE,
@@ -64,6 +65,7 @@ INTERM_ONLY = {
     "persons": "--persons",
     "revisits": "--revisits",
     "partner_scale": "--partner-scale",
+    "remask_noise": "--remask-noise",
     "schedule": "--schedule",
     "noise": "--noise",
     "reaction": "--reaction",
@@ -93,6 +95,7 @@ class Settings:
     persons: str = PERSONS
     revisits: int = REVISITS
     partner_scale: float = PARTNER_SCALE
+    remask_noise: float = REMASK_NOISE
     batch_size: int = 32
     fps: float = 30.0
 
@@ -259,6 +262,7 @@ def generate_samples(
         persons=settings.persons,
         revisits=settings.revisits,
         partner_scale=settings.partner_scale,
+        remask_noise=settings.remask_noise,
     )
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
@@ -471,6 +475,7 @@ class Request:
     persons: str | None = None
     revisits: int | None = None
     partner_scale: float | None = None
+    remask_noise: float | None = None
     batch_size: int | None = None
     fps: float | None = None
     reaction: str | None = None
@@ -516,6 +521,12 @@ def run(request: Request) -> list[Path]:
             f"--partner-scale {request.partner_scale} needs --persons in_turn or --reaction "
             f"(one person decoded beside the other's tokens), got --persons {persons}"
         )
+    noise = request.noise or defaults["sampler"]["noise"]
+    if request.remask_noise and noise != "per_sample":
+        raise ValueError(
+            f"--remask-noise {request.remask_noise} draws each sample's noise from its own seed; "
+            f"it needs --noise per_sample, got --noise {noise}"
+        )
     count = request.samples or defaults["samples"]
     out = Path(request.out or defaults["out"])
     folders = sample_folders(captions, count, out)
@@ -534,11 +545,14 @@ def run(request: Request) -> list[Path]:
         top_k_ratio=request.top_k or sampler["top_k_ratio"],
         temperature=sampler["temperature"] if request.temperature is None else request.temperature,
         schedule=request.schedule or sampler["schedule"],
-        noise=request.noise or sampler["noise"],
+        noise=noise,
         persons=persons,
         revisits=sampler["revisits"] if request.revisits is None else request.revisits,
         partner_scale=(
             sampler["partner_scale"] if request.partner_scale is None else request.partner_scale
+        ),
+        remask_noise=(
+            sampler["remask_noise"] if request.remask_noise is None else request.remask_noise
         ),
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,

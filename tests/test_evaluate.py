@@ -281,6 +281,26 @@ def test_generate_revisits_re_decode_in_turn_and_are_refused_together(runs, tmp_
     assert sorted(tmp_path.rglob("*")) == before
 
 
+def test_generate_remask_noise_is_recorded_and_needs_per_sample_noise(runs, tmp_path, capsys):
+    base = ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
+    base += ["--iterations", "3", "--no-render"]
+    for noise in ("0", "2"):
+        out = tmp_path / noise
+        assert cli([*base, "--remask-noise", noise, "--out", str(out)]) == 0
+    plain, noisy = (tmp_path / n / "they_hug_00-00" for n in ("0", "2"))
+    assert json.loads((noisy / "sample.json").read_text())["settings"]["remask_noise"] == 2.0
+    motions = [np.load(folder / "features.npy") for folder in (plain, noisy)]
+    assert not np.array_equal(*motions)  # the same seed: other codes were kept early
+    before = sorted(tmp_path.rglob("*"))
+    reference = [*base, "--remask-noise", "1", "--noise", "reference", "--out", str(tmp_path)]
+    assert cli(reference) == 2
+    assert (
+        "--remask-noise 1.0 draws each sample's noise from its own seed; it needs --noise "
+        "per_sample, got --noise reference"
+    ) in capsys.readouterr().err
+    assert sorted(tmp_path.rglob("*")) == before
+
+
 def test_generate_partner_guidance_is_recorded_and_refused_together(runs, tmp_path, capsys):
     base = ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
     base += ["--iterations", "2", "--no-render"]

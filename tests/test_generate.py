@@ -94,6 +94,7 @@ def test_cli_reports_an_unknown_checkpoint(tmp_path, capsys):
         ("--iterations", "0", "expected an integer >= 1, got 0"),
         ("--revisits", "-1", "expected an integer >= 0, got -1"),
         ("--partner-scale", "-0.5", "expected a finite number >= 0, got -0.5"),
+        ("--remask-noise", "-1", "expected a finite number >= 0, got -1"),
         ("--seconds", "nan", "expected a finite number > 0, got nan"),
         ("--seconds", "-2", "expected a finite number > 0, got -2"),
         ("--temperature", "inf", "expected a finite number > 0, got inf"),

@@ -16,6 +16,7 @@ from intermask.interm.decoding import (
     NOISE,
     PARTNER_SCALE,
     PERSONS,
+    REMASK_NOISE,
     REVISITS,
     SCHEDULE,
     TEMPERATURE,
@@ -33,6 +34,7 @@ LIBRARY = {
     "persons": PERSONS,
     "revisits": REVISITS,
     "partner_scale": PARTNER_SCALE,
+    "remask_noise": REMASK_NOISE,
 }
 
 
@@ -44,13 +46,15 @@ def test_generate_and_eval_compose_the_library_defaults():
         demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
     assert dict(paper.sampler) == LIBRARY
     # the demo's changes: persons in turn, 5 iterations each, a weaker guidance (docs/learning.md,
-    # ninth pass) and one revisit, of person A given B (eleventh pass)
+    # ninth pass), two revisits (A given B, then B given the new A: eleventh and 24th passes) and
+    # randomised re-masking (24th pass)
     assert dict(demo.sampler) == {
         **LIBRARY,
         "iterations": 5,
         "persons": "in_turn",
         "cfg_scale": 1.5,
-        "revisits": 1,
+        "revisits": 2,
+        "remask_noise": 2.0,
     }
 
 
@@ -66,4 +70,5 @@ def test_demo_samples_are_decoded_as_the_demo_table():
     assert float(flags["cfg-scale"]) == demo.sampler.cfg_scale
     assert flags["persons"] == demo.sampler.persons
     assert int(flags["revisits"]) == demo.sampler.revisits
+    assert float(flags["remask-noise"]) == demo.sampler.remask_noise
     assert round(float(flags["seconds"]) * FPS) == demo.data.max_length  # the crops' frames

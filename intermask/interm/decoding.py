@@ -57,6 +57,7 @@ PERSONS = "together"  # "together" (section 3.3: both persons each pass) or "in_
 PERSON_ORDERS = ("together", "in_turn")
 REVISITS = 0  # in-turn decoding: later turns that re-decode one person given the other
 PARTNER_SCALE = 0.0  # partner guidance: g in ``+ g * (cond - cond with the partner hidden)``
+REMASK_NOISE = 0.0  # t of the re-masking noise (MaskGIT): Gumbel noise of scale t (1 - (i + 1) / I)
 
 
 # a drop-in for InterMTransformer.forward_with_condition(tokens_a, tokens_b, condition, lengths)
@@ -214,17 +215,30 @@ def sample_codes(
     """
     if temperature == 0:
         return logits.argmax(dim=-1)
-    uniform = torch.full_like(logits, 0.5)
+    gumbel = _gumbel(logits, lengths_in_steps, generators, active, time_dim=-2)
+    return (logits / temperature + gumbel).argmax(dim=-1)
+
+
+def _gumbel(
+    like: torch.Tensor,
+    lengths_in_steps: torch.Tensor,
+    generators: Sequence[torch.Generator],
+    active: torch.Tensor | None,
+    *,
+    time_dim: int,
+) -> torch.Tensor:
+    """Standard Gumbel noise shaped like ``like`` (B, ...): sample b's from its own generator,
+    over its first ``lengths_in_steps[b]`` steps of ``time_dim`` (a negative dimension) only;
+    the rest, and samples where ``active`` is False (no draw), get the constant
+    ``-log(-log(0.5))``."""
+    uniform = torch.full_like(like, 0.5)
     lengths = lengths_in_steps.tolist()  # one read-back for the batch, not one per sample
     drawing = [True] * len(generators) if active is None else active.tolist()
     for b, generator in enumerate(generators):
-        if not drawing[b]:
-            continue
-        length = lengths[b]
-        shape = (*logits.shape[1:-2], length, logits.shape[-1])
-        uniform[b, ..., :length, :] = torch.rand(shape, generator=generator, device=logits.device)
-    gumbel = -torch.log(-torch.log(uniform.clamp(1e-20, 1 - 1e-7)))
-    return (logits / temperature + gumbel).argmax(dim=-1)
+        if drawing[b]:
+            view = uniform[b].narrow(time_dim, 0, lengths[b])
+            view.copy_(torch.rand(view.shape, generator=generator, device=like.device))
+    return -torch.log(-torch.log(uniform.clamp(1e-20, 1 - 1e-7)))
 
 
 def _generators(seeds, batch: int, device: torch.device) -> list[torch.Generator]:
@@ -296,6 +310,7 @@ class _Settings(NamedTuple):
     noise: str = NOISE
     partner_scale: float = PARTNER_SCALE
     forward: Forward | None = None  # None: model.forward_with_condition
+    remask_noise: float = REMASK_NOISE
 
 
 def _sample(
@@ -313,6 +328,25 @@ def _sample(
     )
     confidence = logits.float().log_softmax(-1).gather(-1, sampled[..., None])[..., 0].exp()
     return sampled, confidence
+
+
+def _remask_scores(
+    confidence: torch.Tensor,
+    settings: _Settings,
+    iteration: int,
+    iterations: int,
+    active: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """The scores :func:`_remask` ranks after iteration ``iteration`` (0-based): the confidence
+    itself, or with ``settings.remask_noise`` t > 0 its log plus Gumbel noise of scale
+    ``t (1 - (i + 1) / I)`` from each sample's own generator (MaskGIT's randomised re-masking:
+    early iterations keep some less likely codes, so the first passes do not commit every
+    position to the caption's most typical pose; docs/learning.md, twenty-fourth pass)."""
+    scale = settings.remask_noise * (1 - (iteration + 1) / iterations)
+    if scale == 0:
+        return confidence
+    noise = _gumbel(confidence, settings.lengths_in_steps, settings.generators, active, time_dim=-1)
+    return confidence.log() + scale * noise
 
 
 def _reference_draw(
@@ -392,7 +426,8 @@ def _decode_collaborative(
             )
         sampled, confidence = _sample(logits, settings)
         tokens = torch.where(undecided, sampled, tokens)
-        undecided = _remask(confidence, undecided, n_generated, i, iterations, settings.schedule)
+        scores = _remask_scores(confidence, settings, i, iterations)
+        undecided = _remask(scores, undecided, n_generated, i, iterations, settings.schedule)
         tokens = tokens.masked_fill(undecided, model.vocabulary.mask_id)
     return tokens
 
@@ -424,10 +459,12 @@ def _decode_alternative(
             )
             # a sample with nothing of this person left draws no noise, so that its result does
             # not depend on whether other samples of the batch forced this pass
-            sampled, confidence = _sample(logits, settings, active=todo.flatten(1).any(1))
+            active = todo.flatten(1).any(1)
+            sampled, confidence = _sample(logits, settings, active=active)
             own = torch.where(todo, sampled, persons[person])
+            scores = _remask_scores(confidence, settings, i, iterations, active)
             pending[person] = _remask(
-                confidence, todo, n_generated[:, person], i, iterations, settings.schedule
+                scores, todo, n_generated[:, person], i, iterations, settings.schedule
             )
             persons[person] = own.masked_fill(pending[person], model.vocabulary.mask_id)
     return torch.stack(persons, dim=1)
@@ -453,6 +490,7 @@ def generate(
     revisits: int = REVISITS,
     partner_scale: float = PARTNER_SCALE,
     forward: Forward | None = None,
+    remask_noise: float = REMASK_NOISE,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -496,6 +534,10 @@ def generate(
             (same arguments and result), e.g. a :class:`~intermask.interm.graphs.GraphedForward`
             that keeps its CUDA graphs from one call to the next. Alternative modeling's passes
             stay eager.
+        remask_noise: t >= 0; with t > 0 each iteration ranks the sampled codes for re-masking
+            by their log confidence plus Gumbel noise of scale ``t (1 - (i + 1) / I)`` drawn from
+            the sample's own seed (MaskGIT's randomised re-masking); 0 (the paper) ranks by the
+            confidence alone. Needs ``noise="per_sample"``.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
@@ -504,6 +546,13 @@ def generate(
         raise ValueError(f"iterations must be at least 1, got {iterations}")
     if temperature < 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
+    if not remask_noise >= 0:  # NaN too
+        raise ValueError(f"remask_noise must be >= 0, got {remask_noise}")
+    if remask_noise and noise != "per_sample":
+        raise ValueError(
+            f"remask_noise ({remask_noise}) draws each sample's noise from its own seed; it needs "
+            f"noise='per_sample', got {noise!r}"
+        )
     if schedule not in SCHEDULES:
         raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
     if noise not in NOISES:
@@ -537,7 +586,8 @@ def generate(
     valid = ~step_padding_mask(lengths_in_steps, steps)[:, None, None, :]  # (B, 1, 1, T')
     valid = valid.expand(batch, 2, model.rows, steps)
     tokens, undecided = _start(model, valid, reference_tokens, edit)
-    generators = _generators(seeds, batch, device) if temperature > 0 else []
+    drawn = temperature > 0 or remask_noise > 0
+    generators = _generators(seeds, batch, device) if drawn else []
 
     was_training = model.training
     model.eval()
@@ -556,6 +606,7 @@ def generate(
             noise,
             partner_scale,
             forward,
+            remask_noise,
         )
         if model.modeling == "alternative":
             tokens = _decode_alternative(model, tokens, undecided, iterations, settings)

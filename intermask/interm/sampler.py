@@ -18,6 +18,7 @@ from intermask.interm.decoding import (
     NOISE,
     PARTNER_SCALE,
     PERSONS,
+    REMASK_NOISE,
     REVISITS,
     SCHEDULE,
     TEMPERATURE,
@@ -81,7 +82,7 @@ class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
     ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise``,
-    ``persons``, ``revisits`` and ``partner_scale`` default to the paper's inference settings
+    ``persons``, ``revisits``, ``partner_scale`` and ``remask_noise`` default to the paper's inference settings
     (section 3.3, appendix C.1). ``cuda_graphs``: on a CUDA device, each shape of decoding pass
     is captured once as a CUDA graph and replayed (:mod:`intermask.interm.graphs`; the same
     kernels, so the same tokens); it does nothing elsewhere.
@@ -102,6 +103,7 @@ class InteractionSampler:
         persons: str = PERSONS,
         revisits: int = REVISITS,
         partner_scale: float = PARTNER_SCALE,
+        remask_noise: float = REMASK_NOISE,
         cuda_graphs: bool = True,
     ) -> None:
         self.net, self.vq, self.text = net, vq, text
@@ -109,7 +111,7 @@ class InteractionSampler:
         self.iterations, self.cfg_scale = iterations, cfg_scale
         self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
         self.noise, self.persons, self.revisits = noise, persons, revisits
-        self.partner_scale = partner_scale
+        self.partner_scale, self.remask_noise = partner_scale, remask_noise
 
     @property
     def device(self) -> torch.device:
@@ -158,6 +160,7 @@ class InteractionSampler:
             persons=self.persons,
             revisits=self.revisits,
             partner_scale=self.partner_scale,
+            remask_noise=self.remask_noise,
             seeds=seeds,
             reference_tokens=reference_tokens,
             edit=edit,

@@ -402,3 +402,71 @@ def test_partner_guidance_is_refused_where_no_person_has_a_fixed_partner(tiny, b
         ValueError, match=r"partner_scale \(0.5\) guides a collaborative model's passes"
     ):
         _run(alternative, text, persons="in_turn", partner_scale=0.5)
+
+
+def test_remask_noise_keeps_the_schedule_and_each_sample_its_own_draws(tiny, monkeypatch):
+    """Gumbel noise on the re-masking ranks changes which codes are kept, not how many; each
+    sample's noise comes from its own seed; 0 is the paper's ranking, bit for bit."""
+    from intermask.interm import decoding
+
+    model, text = tiny
+    plain = _run(model, text)
+    assert torch.equal(_run(model, text, remask_noise=0.0), plain)
+    noisy = _run(model, text, steps=STEPS, seeds=[0, 1, 2], remask_noise=3.0)
+    assert not torch.equal(noisy, plain)
+    alone = _run(model, _subset(text, [1]), LENGTHS[1:2], steps=STEPS, seeds=[1], remask_noise=3.0)
+    assert torch.equal(alone[0], noisy[1])
+    assert torch.equal(_run(model, text, remask_noise=3.0), noisy)  # reproducible
+    seen = []
+    original = decoding.guided_logits
+
+    def recording(model, tokens, *args, **kwargs):
+        seen.append((tokens == model.vocabulary.mask_id).flatten(1).sum(1).tolist())
+        return original(model, tokens, *args, **kwargs)
+
+    monkeypatch.setattr(decoding, "guided_logits", recording)
+    _run(model, text)
+    counts = list(seen)
+    seen.clear()
+    _run(model, text, remask_noise=3.0)
+    assert seen == counts
+
+
+def test_remask_noise_ranks_by_log_confidence_plus_fading_gumbel_noise():
+    """Iteration i of I adds t (1 - (i + 1) / I) g to log p, g drawn from the sample's own
+    generator over its own steps: no noise after the last iteration."""
+    from intermask.interm.decoding import _remask_scores, _Settings
+
+    confidence = torch.tensor([[0.5, 0.25, 0.125]])
+    settings = _Settings(
+        condition=None,
+        null=torch.zeros(1, 4),
+        lengths_in_steps=torch.tensor([3]),
+        cfg_scale=1.0,
+        top_k_ratio=1.0,
+        temperature=1.0,
+        generators=[torch.Generator().manual_seed(7)],
+        remask_noise=2.0,
+    )
+    scores = _remask_scores(confidence, settings, 0, 4)
+    uniform = torch.rand(1, 3, generator=torch.Generator().manual_seed(7))
+    gumbel = -torch.log(-torch.log(uniform))
+    assert torch.allclose(scores, confidence.log() + 2.0 * 0.75 * gumbel)
+    assert torch.equal(_remask_scores(confidence, settings, 3, 4), confidence)
+    short = settings._replace(lengths_in_steps=torch.tensor([2]))
+    short = short._replace(generators=[torch.Generator().manual_seed(7)])
+    padded = _remask_scores(confidence, short, 1, 4)
+    first_two = -torch.log(-torch.log(uniform[0, :2]))
+    assert torch.allclose(padded[0, :2], confidence[0, :2].log() + 2.0 * 0.5 * first_two)
+
+
+def test_remask_noise_is_checked(tiny):
+    model, text = tiny
+    with pytest.raises(ValueError, match=r"remask_noise must be >= 0, got -1.0"):
+        _run(model, text, remask_noise=-1.0)
+    with pytest.raises(ValueError, match=r"remask_noise must be >= 0, got nan"):
+        _run(model, text, remask_noise=math.nan)
+    with pytest.raises(
+        ValueError, match=r"remask_noise \(1.0\) draws each sample's noise from its own seed"
+    ):
+        _run(model, text, remask_noise=1.0, noise="reference")
