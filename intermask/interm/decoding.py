@@ -340,8 +340,8 @@ def _remask_scores(
     """The scores :func:`_remask` ranks after iteration ``iteration`` (0-based): the confidence
     itself, or with ``settings.remask_noise`` t > 0 its log plus Gumbel noise of scale
     ``t (1 - (i + 1) / I)`` from each sample's own generator (MaskGIT's randomised re-masking:
-    early iterations keep some less likely codes, so the first passes do not commit every
-    position to the caption's most typical pose; docs/learning.md, twenty-fourth pass)."""
+    early iterations keep some codes other than the most confident ones; docs/learning.md,
+    twenty-fourth pass)."""
     scale = settings.remask_noise * (1 - (iteration + 1) / iterations)
     if scale == 0:
         return confidence
