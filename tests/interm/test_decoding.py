@@ -30,6 +30,23 @@ def _subset(text: TextFeatures, index: list[int]) -> TextFeatures:
     return TextFeatures(text.features[index], text.eot_index[index])
 
 
+def _masked_counts(monkeypatch, model, text, **kwargs) -> list[list[int]]:
+    """[MASK] tokens per sample seen by each guided pass of one :func:`_run`."""
+    from intermask.interm import decoding
+
+    seen = []
+    original = decoding.guided_logits
+
+    def recording(model, tokens, *args, **kwargs):
+        seen.append((tokens == model.vocabulary.mask_id).flatten(1).sum(1).tolist())
+        return original(model, tokens, *args, **kwargs)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(decoding, "guided_logits", recording)
+        _run(model, text, **kwargs)
+    return seen
+
+
 @pytest.fixture
 def tiny(build):
     return build.model(), build.text(3)
@@ -155,18 +172,8 @@ def test_each_iteration_masks_the_count_of_its_schedule(tiny, monkeypatch, sched
     max(1, round(gamma(k / (I - 1)) n)), so its last pass re-predicts one token."""
     import math
 
-    from intermask.interm import decoding
-
     model, text = tiny
-    seen = []
-    original = decoding.guided_logits
-
-    def recording(model, tokens, *args, **kwargs):
-        seen.append((tokens == model.vocabulary.mask_id).flatten(1).sum(1).tolist())
-        return original(model, tokens, *args, **kwargs)
-
-    monkeypatch.setattr(decoding, "guided_logits", recording)
-    _run(model, text, iterations=ITERATIONS, schedule=schedule)
+    seen = _masked_counts(monkeypatch, model, text, iterations=ITERATIONS, schedule=schedule)
     n = [2 * ROWS * int(length) for length in LENGTHS]  # both persons' tokens
     gamma = [math.cos(math.pi / 2 * tau) for tau in (0.0, 1 / 3, 2 / 3, 1.0, 0.25, 0.5, 0.75)]
     if schedule == "paper":  # iteration i sees ceil(gamma(i / 4) n)
@@ -407,8 +414,6 @@ def test_partner_guidance_is_refused_where_no_person_has_a_fixed_partner(tiny, b
 def test_remask_noise_keeps_the_schedule_and_each_sample_its_own_draws(tiny, monkeypatch):
     """Gumbel noise on the re-masking ranks changes which codes are kept, not how many; each
     sample's noise comes from its own seed; 0 is the paper's ranking, bit for bit."""
-    from intermask.interm import decoding
-
     model, text = tiny
     plain = _run(model, text)
     assert torch.equal(_run(model, text, remask_noise=0.0), plain)
@@ -417,19 +422,8 @@ def test_remask_noise_keeps_the_schedule_and_each_sample_its_own_draws(tiny, mon
     alone = _run(model, _subset(text, [1]), LENGTHS[1:2], steps=STEPS, seeds=[1], remask_noise=3.0)
     assert torch.equal(alone[0], noisy[1])
     assert torch.equal(_run(model, text, remask_noise=3.0), noisy)  # reproducible
-    seen = []
-    original = decoding.guided_logits
-
-    def recording(model, tokens, *args, **kwargs):
-        seen.append((tokens == model.vocabulary.mask_id).flatten(1).sum(1).tolist())
-        return original(model, tokens, *args, **kwargs)
-
-    monkeypatch.setattr(decoding, "guided_logits", recording)
-    _run(model, text)
-    counts = list(seen)
-    seen.clear()
-    _run(model, text, remask_noise=3.0)
-    assert seen == counts
+    counts = _masked_counts(monkeypatch, model, text)
+    assert _masked_counts(monkeypatch, model, text, remask_noise=3.0) == counts
 
 
 def test_remask_noise_ranks_by_log_confidence_plus_fading_gumbel_noise():
