@@ -12,6 +12,11 @@ UV_VERSION := 0.13.8
 # default (synthetic) or the dataset an experiment file selects (experiment=vq_interhuman).
 DATA ?=
 DATA_ARG = $(if $(DATA),data=$(DATA))
+# PRECISION overrides trainer.precision in every training job (train-*, demo, demo-momask); empty =
+# the configs' `auto`: bf16-mixed on CUDA with bf16 and on CPUs with native bf16 (AVX512-BF16, AMX),
+# 32-true elsewhere. `make demo PRECISION=32-true` times a bf16 CPU as an AVX2 CPU runs.
+PRECISION ?=
+PRECISION_ARG = $(if $(PRECISION),trainer.precision=$(PRECISION))
 CLIPS ?= 1000
 SEED ?= 0
 ARGS ?=
@@ -64,20 +69,20 @@ data-stats: install ## compute normalization statistics: make data-stats ROOT=da
 	$(VENV)/bin/intermask data stats $(or $(ROOT),$(DATA_DIR)/synthetic/interhuman)
 
 train-vq: install ## train the VQ-VAE: make train-vq [DATA=synthetic|synthetic_interx|interhuman|interx] [ARGS="trainer.max_epochs=3"]
-	$(PY) -m intermask.train --config-name train_vq $(DATA_ARG) $(ARGS)
+	$(PY) -m intermask.train --config-name train_vq $(DATA_ARG) $(PRECISION_ARG) $(ARGS)
 
 train-evaluator: install ## train the text-motion evaluator of the metrics: make train-evaluator [DATA=...] [ARGS="experiment=evaluator_demo"]
-	$(PY) -m intermask.train --config-name train_evaluator $(DATA_ARG) $(ARGS)
+	$(PY) -m intermask.train --config-name train_evaluator $(DATA_ARG) $(PRECISION_ARG) $(ARGS)
 
 # the newest VQ run's last.ckpt unless VQ_CKPT is given
 VQ_CKPT ?= $(shell ls -t outputs/train_vq/runs/*/checkpoints/last.ckpt 2>/dev/null | head -n 1)
 
 train-gen: install ## train Inter-M on frozen VQ tokens: make train-gen [VQ_CKPT=.../last.ckpt] [DATA=...] [ARGS="..."]
 	@test -n "$(VQ_CKPT)" || { echo "train-gen: no VQ checkpoint; run make train-vq or pass VQ_CKPT=<run>/checkpoints/last.ckpt" >&2; exit 2; }
-	$(PY) -m intermask.train --config-name train_gen $(DATA_ARG) vq_ckpt=$(VQ_CKPT) $(ARGS)
+	$(PY) -m intermask.train --config-name train_gen $(DATA_ARG) vq_ckpt=$(VQ_CKPT) $(PRECISION_ARG) $(ARGS)
 
 train-arflow: install ## train ARFlow reactions: make train-arflow [DATA=...] [ARGS="experiment=arflow_demo"]
-	$(PY) -m intermask.train --config-name train_arflow $(DATA_ARG) $(ARGS)
+	$(PY) -m intermask.train --config-name train_arflow $(DATA_ARG) $(PRECISION_ARG) $(ARGS)
 
 # the newest generator run with a checkpoint (a run that died before its first checkpoint is
 # never picked) and the newest evaluator's best checkpoint unless given
@@ -107,12 +112,12 @@ DEMO_PROMPTS := --text "One person reaches out their right hand and the other pe
 # frames): 4 s would ask it to extrapolate
 DEMO_DECODING := --seconds 3.2 --persons in_turn --revisits 2 --iterations 5 --cfg-scale 1.5 --remask-noise 2
 
-demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator, VQ-VAE, generator, protocol, samples (replaces DEMO_DIR)
+demo: install ## the whole pipeline on the synthetic data, CPU-sized: evaluator, VQ-VAE, generator, protocol, samples (replaces DEMO_DIR) [PRECISION=32-true]
 	rm -rf $(DEMO_DIR)
-	$(PY) -m intermask.train --config-name train_evaluator experiment=evaluator_demo hydra.run.dir=$(DEMO_DIR)/evaluator
-	$(PY) -m intermask.train --config-name train_vq experiment=vq_demo hydra.run.dir=$(DEMO_DIR)/vq
+	$(PY) -m intermask.train --config-name train_evaluator experiment=evaluator_demo hydra.run.dir=$(DEMO_DIR)/evaluator $(PRECISION_ARG)
+	$(PY) -m intermask.train --config-name train_vq experiment=vq_demo hydra.run.dir=$(DEMO_DIR)/vq $(PRECISION_ARG)
 	$(PY) -m intermask.train --config-name train_gen experiment=gen_demo hydra.run.dir=$(DEMO_DIR)/gen \
-		vq_ckpt=$(DEMO_DIR)/vq/checkpoints/last.ckpt
+		vq_ckpt=$(DEMO_DIR)/vq/checkpoints/last.ckpt $(PRECISION_ARG)
 	$(PY) -m intermask.evaluate experiment=eval_demo hydra.run.dir=$(DEMO_DIR)/eval gen_ckpt=$(DEMO_DIR)/gen \
 		eval_ckpt=$$(ls $(DEMO_DIR)/evaluator/checkpoints/best*.ckpt | head -n 1)
 	$(VENV)/bin/intermask generate --checkpoint $(DEMO_DIR)/gen $(DEMO_PROMPTS) $(DEMO_DECODING) --samples 2 \
@@ -125,12 +130,12 @@ MOMASK_DIR ?= outputs/demo_momask
 
 demo-momask: install ## MoMask on the synthetic HumanML3D-layout data, CPU-sized: evaluator, RVQ, masked + residual transformers, protocol, samples
 	rm -rf $(MOMASK_DIR)
-	$(PY) -m intermask.train --config-name train_evaluator experiment=evaluator_humanml3d_demo hydra.run.dir=$(MOMASK_DIR)/evaluator
-	$(PY) -m intermask.train --config-name train_vq data=synthetic_humanml3d experiment=momask_rvq_demo hydra.run.dir=$(MOMASK_DIR)/rvq
+	$(PY) -m intermask.train --config-name train_evaluator experiment=evaluator_humanml3d_demo hydra.run.dir=$(MOMASK_DIR)/evaluator $(PRECISION_ARG)
+	$(PY) -m intermask.train --config-name train_vq data=synthetic_humanml3d experiment=momask_rvq_demo hydra.run.dir=$(MOMASK_DIR)/rvq $(PRECISION_ARG)
 	$(PY) -m intermask.train --config-name train_gen experiment=momask_mask_demo hydra.run.dir=$(MOMASK_DIR)/mask \
-		vq_ckpt=$(MOMASK_DIR)/rvq/checkpoints/last.ckpt
+		vq_ckpt=$(MOMASK_DIR)/rvq/checkpoints/last.ckpt $(PRECISION_ARG)
 	$(PY) -m intermask.train --config-name train_gen experiment=momask_residual_demo hydra.run.dir=$(MOMASK_DIR)/residual \
-		vq_ckpt=$(MOMASK_DIR)/rvq/checkpoints/last.ckpt
+		vq_ckpt=$(MOMASK_DIR)/rvq/checkpoints/last.ckpt $(PRECISION_ARG)
 	$(PY) -m intermask.evaluate data=synthetic_humanml3d mode=text_to_motion reconstruction_row=true \
 		hydra.run.dir=$(MOMASK_DIR)/eval mask_ckpt=$(MOMASK_DIR)/mask residual_ckpt=$(MOMASK_DIR)/residual \
 		eval_ckpt=$$(ls $(MOMASK_DIR)/evaluator/checkpoints/best*.ckpt | head -n 1)

@@ -36,3 +36,32 @@ def test_runs_without_a_checkpoint_are_never_picked_as_newest(tmp_path):
     assert chosen["VQ_CKPT"] == "outputs/train_vq/runs/older/checkpoints/last.ckpt"
     assert chosen["GEN_CKPT"] == "outputs/train_gen/runs/older/checkpoints/last.ckpt"
     assert chosen["ARFLOW_CKPT"] == "outputs/train_arflow/runs/older/checkpoints/last.ckpt"
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
+@pytest.mark.parametrize("target", ["demo", "demo-momask"])
+def test_precision_reaches_every_training_job_of_a_demo_and_nothing_else(target):
+    def planned(*variables):
+        return (
+            subprocess.run(
+                ["make", "-n", "-s", "-f", str(ROOT / "Makefile"), target, *variables],
+                cwd=ROOT,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            .stdout.replace("\\\n", " ")
+            .splitlines()
+        )  # one line per command
+
+    jobs = {"demo": 3, "demo-momask": 4}[target]
+    forced = planned("PRECISION=32-true")
+    trains = [line for line in forced if "-m intermask.train " in line]
+    assert len(trains) == jobs
+    assert all("trainer.precision=32-true" in line.split() for line in trains), trains
+    # the protocol and the samples run without autocast: the switch is for training only
+    assert not [
+        line for line in forced if "trainer.precision" in line and "-m intermask.train " not in line
+    ]
+    # without PRECISION the configs' `auto` decides
+    assert not [line for line in planned() if "trainer.precision" in line]

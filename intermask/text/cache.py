@@ -111,7 +111,12 @@ class TextFeatureCache:
         self.hits += len(captions) - len(missing)
 
         device = self.encoder.device
-        tokens = torch.stack([found[c][0] for c in captions]).to(device=device, dtype=torch.float32)
+        # The entries are fp16 on the CPU. Under CPU autocast (bf16-mixed training on a CPU with
+        # native bf16) stack/cat refuse fp16 inputs ("Unexpected floating ScalarType in
+        # at::autocast::prioritize"); this is a copy, not arithmetic, so autocast stays out of it.
+        with torch.autocast(device_type="cpu", enabled=False):
+            tokens = torch.stack([found[c][0] for c in captions])
+        tokens = tokens.to(device=device, dtype=torch.float32)
         eot_index = torch.tensor([found[c][1] for c in captions], dtype=torch.int64, device=device)
         return TextFeatures(tokens, eot_index, padding_mask_from_eot(eot_index, tokens.shape[1]))
 
