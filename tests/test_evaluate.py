@@ -354,6 +354,7 @@ def test_demo_protocol_setting():
     # persons in turn, 5 iterations each: the forward passes of 10 iterations together
     assert (cfg.sampler.persons, cfg.sampler.iterations) == ("in_turn", 5)
     assert cfg.protocol.mm_replications == 1 and cfg.data.synthesize_if_missing
+    assert (cfg.protocol.mm_texts, cfg.protocol.mm_generations) == (16, 10)  # synthetic: 32 x 10
     assert cfg.penetration.modes == ["reaction"] and cfg.arflow.steps == 5
     assert list(cfg.arflow.step_ablation) == [2, 10]
 
