@@ -44,7 +44,6 @@ def test_second_call_is_all_hits_and_identical(tmp_path, spy, tiny_encoder):
     assert torch.equal(first.padding_mask, fresh.padding_mask)
 
 
-
 def test_hits_and_misses_under_cpu_bf16_autocast(tmp_path, spy):
     """bf16-mixed training on a CPU with native bf16 reads the cache under CPU autocast, which
     refuses fp16 inputs to stack ("Unexpected floating ScalarType"): the demo's generator stage
@@ -56,6 +55,7 @@ def test_hits_and_misses_under_cpu_bf16_autocast(tmp_path, spy):
     assert (cache.hits, cache.misses) == (2, 3)
     assert mixed.tokens.dtype == torch.float32 and mixed.tokens.shape[0] == 3
     assert torch.equal(mixed.tokens[:2], plain.tokens)  # the hits: the stored fp16, widened
+
 
 def test_only_misses_are_encoded(tmp_path, spy):
     cache = TextFeatureCache(encoder=spy, cache_dir=tmp_path)
