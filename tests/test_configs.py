@@ -90,18 +90,6 @@ def test_trainer_presets_compose():
     assert _compose("train_vq", ["trainer=gpu"]).trainer.precision == "bf16-mixed"
 
 
-def test_demo_stages_pick_their_precision():
-    """On a CPU with native bf16 the tokenizer's convolutions gain from bf16 autocast and the two
-    small transformers lose (docs/learning.md, 25th pass): only vq_demo follows the hardware."""
-    stages = {
-        "train_vq": "experiment=vq_demo",
-        "train_evaluator": "experiment=evaluator_demo",
-        "train_gen": "experiment=gen_demo",
-    }
-    chosen = {job: _compose(job, [choice]).trainer.precision for job, choice in stages.items()}
-    assert chosen == {"train_vq": "auto", "train_evaluator": "32-true", "train_gen": "32-true"}
-
-
 def test_slurm_launcher_composes():
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose("train_vq", overrides=["hydra/launcher=slurm"], return_hydra_config=True)

@@ -41,7 +41,7 @@ def test_runs_without_a_checkpoint_are_never_picked_as_newest(tmp_path):
 @pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
 @pytest.mark.parametrize("target", ["demo", "demo-momask"])
 def test_precision_reaches_every_training_job_of_a_demo_and_nothing_else(target):
-    def planned(*variables):
+    def planned(*variables):  # one line per command: make -n keeps a recipe's continuations
         return (
             subprocess.run(
                 ["make", "-n", "-s", "-f", str(ROOT / "Makefile"), target, *variables],
@@ -52,7 +52,7 @@ def test_precision_reaches_every_training_job_of_a_demo_and_nothing_else(target)
             )
             .stdout.replace("\\\n", " ")
             .splitlines()
-        )  # one line per command
+        )
 
     jobs = {"demo": 3, "demo-momask": 4}[target]
     forced = planned("PRECISION=32-true")
