@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -70,6 +71,19 @@ def test_train_gen_learns_on_frozen_tokens(synthetic_interhuman_root, vq_checkpo
     assert all(key.startswith("net.") for key in checkpoint["state_dict"])  # frozen parts stay out
     vq_after = load_vq(vq_checkpoint).state_dict()
     assert all(torch.equal(vq_before[key], vq_after[key]) for key in vq_before)
+
+
+def test_train_gen_trains_under_cpu_bf16_autocast(
+    synthetic_interhuman_root, vq_checkpoint, tmp_path
+):
+    """`precision: auto` picks bf16-mixed on a CPU with native bf16; the generator's first
+    validation step once died there (the text cache stacked fp16 entries under CPU autocast)."""
+    extra = ("trainer.accelerator=cpu", "trainer.precision=bf16-mixed")
+    metrics = train(_gen_config(synthetic_interhuman_root, vq_checkpoint, tmp_path, extra=extra))
+    assert torch.isfinite(torch.tensor(metrics["val/loss"])) and metrics["val/loss"] > 0
+    record = json.loads((tmp_path / "run_record.json").read_text())
+    assert record["precision"]["precision"] == "bf16-mixed"
+    assert _last(tmp_path)["global_step"] == 2
 
 
 def test_a_generator_with_code_vectors_loads_them_with_its_weights(
