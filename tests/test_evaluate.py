@@ -263,6 +263,14 @@ def test_the_generate_job_runs_from_python_as_from_the_command_line(runs, tmp_pa
     assert np.load(folders[0] / "features.npy").shape == (2, 28, 262)  # 1 s at 30 fps -> 28
 
 
+def _assert_refused(args: list[str], message: str, tmp_path: Path, capsys) -> None:
+    """`intermask <args>` exits 2 with ``message`` on stderr and writes nothing under tmp_path."""
+    before = sorted(tmp_path.rglob("*"))
+    assert cli(args) == 2
+    assert message in capsys.readouterr().err
+    assert sorted(tmp_path.rglob("*")) == before
+
+
 def test_generate_revisits_re_decode_in_turn_and_are_refused_together(runs, tmp_path, capsys):
     base = ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
     base += ["--iterations", "1", "--no-render", "--persons", "in_turn"]
@@ -274,11 +282,10 @@ def test_generate_revisits_re_decode_in_turn_and_are_refused_together(runs, tmp_
     motions = [np.load(folder / "features.npy") for folder in (plain, revisited)]
     assert motions[0].shape == motions[1].shape == (2, 28, 262)
     assert not np.array_equal(*motions)  # the same seed: the revisit re-decoded the persons
-    before = sorted(tmp_path.rglob("*"))
     together = [*base[:-2], "--persons", "together", "--revisits", "2", "--out", str(tmp_path)]
-    assert cli(together) == 2
-    assert "--revisits 2 needs --persons in_turn, got 'together'" in capsys.readouterr().err
-    assert sorted(tmp_path.rglob("*")) == before
+    _assert_refused(
+        together, "--revisits 2 needs --persons in_turn, got 'together'", tmp_path, capsys
+    )
 
 
 def test_generate_remask_noise_is_recorded_and_needs_per_sample_noise(runs, tmp_path, capsys):
@@ -291,14 +298,12 @@ def test_generate_remask_noise_is_recorded_and_needs_per_sample_noise(runs, tmp_
     assert json.loads((noisy / "sample.json").read_text())["settings"]["remask_noise"] == 2.0
     motions = [np.load(folder / "features.npy") for folder in (plain, noisy)]
     assert not np.array_equal(*motions)  # the same seed: other codes were kept early
-    before = sorted(tmp_path.rglob("*"))
     reference = [*base, "--remask-noise", "1", "--noise", "reference", "--out", str(tmp_path)]
-    assert cli(reference) == 2
-    assert (
+    message = (
         "--remask-noise 1.0 draws each sample's noise from its own seed; it needs --noise "
         "per_sample, got --noise reference"
-    ) in capsys.readouterr().err
-    assert sorted(tmp_path.rglob("*")) == before
+    )
+    _assert_refused(reference, message, tmp_path, capsys)
 
 
 def test_generate_partner_guidance_is_recorded_and_refused_together(runs, tmp_path, capsys):
@@ -308,14 +313,12 @@ def test_generate_partner_guidance_is_recorded_and_refused_together(runs, tmp_pa
     assert cli(in_turn) == 0, capsys.readouterr().err
     record = json.loads((tmp_path / "they_hug_00-00" / "sample.json").read_text())
     assert record["settings"]["partner_scale"] == 1.5 and record["settings"]["persons"] == "in_turn"
-    before = sorted(tmp_path.rglob("*"))
     together = [*base, "--partner-scale", "1", "--out", str(tmp_path / "together")]
-    assert cli(together) == 2
-    assert (
+    message = (
         "--partner-scale 1.0 needs --persons in_turn or --reaction (one person decoded beside "
         "the other's tokens), got --persons together"
-    ) in capsys.readouterr().err
-    assert sorted(tmp_path.rglob("*")) == before
+    )
+    _assert_refused(together, message, tmp_path, capsys)
 
 
 def _features_file(tmp_path: Path) -> Path:
