@@ -116,6 +116,37 @@ def test_decoding_through_cuda_graphs_gives_the_eager_tokens(demo_models, precis
     assert graphed.captured == 2
 
 
+def test_masked_attention_on_cuda_skips_the_cudnn_kernel_and_stays_exact(monkeypatch):
+    """With a mask, SDPA runs without cuDNN's kernel (slower with masks: docs/performance.md)
+    and gives the math kernel's result; an unmasked call keeps PyTorch's choice, and the global
+    switch is as it was afterwards."""
+    from intermask.utils import layers
+
+    torch.manual_seed(0)
+    attention = layers.Attention(width=128, heads=2, dropout=0.0).eval()
+    x = torch.randn(6, 40, 128)
+    mask = torch.rand(6, 1, 1, 40) > 0.4
+    mask[:, ..., 0] = True  # every query has a key
+    with torch.no_grad():
+        expected = attention(x, mask=mask)  # CPU, fp32
+
+    real, seen = layers.F.scaled_dot_product_attention, []
+
+    def spy(*args, **kwargs):
+        seen.append((kwargs["attn_mask"] is not None, torch.backends.cuda.cudnn_sdp_enabled()))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(layers.F, "scaled_dot_product_attention", spy)
+    gpu = attention.to(CUDA)
+    with torch.no_grad(), torch.autocast("cuda", dtype=torch.bfloat16):
+        masked = gpu(x.to(CUDA), mask=mask.to(CUDA))
+        gpu(x.to(CUDA))
+    before = torch.backends.cuda.cudnn_sdp_enabled()
+    assert seen == [(True, False), (False, before)]
+    assert masked.dtype == torch.bfloat16
+    torch.testing.assert_close(masked.float().cpu(), expected, rtol=0.0, atol=0.03)
+
+
 def test_the_vq_round_trip_on_cuda_equals_the_cpu_one(demo_models):
     (cpu, _), (gpu, _) = demo_models
     generator = torch.Generator().manual_seed(5)

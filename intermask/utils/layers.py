@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+from contextlib import nullcontext
+
 import torch
 import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
+from torch.nn.attention import SDPBackend, sdpa_kernel
+
+# SDPA kernels a masked attention may use: all but cuDNN's. With a mask, flash attention is not
+# eligible and PyTorch (2.11, H200, bf16) picks cuDNN's kernel, which took 91 ms of a 128-sample
+# paper-size Inter-M pass where the memory-efficient kernel took 67 ms (same masks, same shapes;
+# docs/performance.md). fp32 never reaches cuDNN's kernel, and CPUs have no such kernel: there
+# nothing changes (the switch is only made on CUDA). Unmasked attention keeps PyTorch's own choice.
+MASKED_BACKENDS = (SDPBackend.FLASH_ATTENTION, SDPBackend.EFFICIENT_ATTENTION, SDPBackend.MATH)
 
 
 class Attention(nn.Module):
@@ -39,9 +49,12 @@ class Attention(nn.Module):
         k, v = rearrange(
             self.key_value(context), "b s (two h d) -> two b h s d", two=2, h=self.heads
         )
-        out = F.scaled_dot_product_attention(
-            q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0
+        dropout = self.dropout if self.training else 0.0
+        kernels = (
+            sdpa_kernel(list(MASKED_BACKENDS)) if mask is not None and q.is_cuda else nullcontext()
         )
+        with kernels:
+            out = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout)
         return self.out(rearrange(out, "b h s d -> b s (h d)"))
 
 
