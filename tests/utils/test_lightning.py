@@ -76,3 +76,37 @@ def test_attention_mask_hides_keys_and_context_defaults_to_the_queries() -> None
     torch.testing.assert_close(attention(x), attention(x, x))
     with pytest.raises(ValueError, match="width 6 is not divisible by 4 heads"):
         Attention(width=6, heads=4, dropout=0.0)
+
+
+def test_masked_attention_on_the_cpu_leaves_the_kernel_choice_to_pytorch(monkeypatch) -> None:
+    """The kernel switch for masked attention is a CUDA one (docs/performance.md): on the CPU a
+    masked call sees PyTorch's own backend flags and gives plain SDPA's output, bit for bit."""
+    import torch.nn.functional as F
+
+    from intermask.utils import layers
+
+    flags = (
+        torch.backends.cuda.cudnn_sdp_enabled(),
+        torch.backends.cuda.mem_efficient_sdp_enabled(),
+    )
+    real, seen = F.scaled_dot_product_attention, []
+
+    def spy(*args, **kwargs):
+        seen.append(
+            (
+                torch.backends.cuda.cudnn_sdp_enabled(),
+                torch.backends.cuda.mem_efficient_sdp_enabled(),
+            )
+        )
+        return real(*args, **kwargs)
+
+    torch.manual_seed(0)
+    attention = layers.Attention(width=8, heads=2, dropout=0.0).eval()
+    x, mask = torch.randn(2, 5, 8), torch.tensor([True, False, True, True, False])
+    monkeypatch.setattr(layers.F, "scaled_dot_product_attention", spy)
+    out = attention(x, mask=mask[None, None, None, :])
+    assert seen == [flags]
+    q = attention.query(x).reshape(2, 5, 2, 4).transpose(1, 2)
+    k, v = attention.key_value(x).reshape(2, 5, 2, 2, 4).permute(2, 0, 3, 1, 4)
+    plain = real(q, k, v, attn_mask=mask[None, None, None, :])
+    assert torch.equal(out, attention.out(plain.transpose(1, 2).reshape(2, 5, 8)))
