@@ -58,7 +58,7 @@ from intermask.interm.module import InterMModule
 from intermask.interm.sampler import decode_tokens
 from intermask.text.cache import TextFeatureCache
 from intermask.text.clip_encoder import padding_mask_from_eot
-from intermask.utils.precision import BF16, FP32, PrecisionChoice, resolve_precision
+from intermask.utils.precision import BF16, OPTIONS, PrecisionChoice, resolve_precision
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 from intermask.vq.module import VQVAEModule
 
@@ -289,15 +289,12 @@ def bench(
     return report
 
 
-PRECISIONS = {"auto": "auto", "32": FP32, "bf16": BF16}
-
-
 def bench_precision(requested: str, device: torch.device) -> PrecisionChoice:
     """``auto`` (the trainer's choice for this device: bf16 autocast on CUDA with bf16 and on
     CPUs with native bf16, fp32 elsewhere), ``32`` or ``bf16``."""
-    if requested not in PRECISIONS:
-        raise ValueError(f"bench precision must be one of {sorted(PRECISIONS)}, got {requested!r}")
-    return resolve_precision(PRECISIONS[requested], device.type)
+    if requested not in OPTIONS:
+        raise ValueError(f"bench precision must be one of {sorted(OPTIONS)}, got {requested!r}")
+    return resolve_precision(OPTIONS[requested], device.type)
 
 
 def _rows(
@@ -500,7 +497,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--precision",
-        choices=sorted(PRECISIONS),
+        choices=sorted(OPTIONS),
         default="auto",
         help="auto: the trainer's choice for the device (bf16 autocast on CUDA and on CPUs with "
         "native bf16, fp32 elsewhere)",

@@ -282,6 +282,12 @@ def _add_generate_parser(commands) -> None:
     parser.add_argument("--person", type=int, choices=(1, 2), help="edit one person only")
     parser.add_argument("--device", help="cpu, cuda, cuda:1 ... (default: cuda when available)")
     parser.add_argument(
+        "--precision",
+        choices=("32", "bf16", "auto"),
+        help="Inter-M decoding: 32 (the default), bf16 autocast (other numbers; recorded in "
+        "sample.json) or auto (bf16 where the device has native bf16)",
+    )
+    parser.add_argument(
         "--out", type=_output_folder, help="output folder (default outputs/generate)"
     )
     parser.add_argument("--no-render", action="store_true", help="write arrays and JSON only")

@@ -32,6 +32,7 @@ from intermask.evaluation.sources import (
 from intermask.evaluation.text_motion import SoloReconstruction, TextToMotion
 from intermask.train import CONFIG_DIR
 from intermask.utils.files import file_hash, resolve_checkpoint
+from intermask.utils.precision import resolve_precision
 from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
@@ -151,12 +152,15 @@ def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Mo
     checkpoints["generator"] = f"{generator.checkpoint} ({file_hash(generator.checkpoint)})"
     checkpoints["vq"] = f"{generator.vq_checkpoint} ({file_hash(generator.vq_checkpoint)})"
     checkpoints["text_encoder"] = generator.text.encoder.extra_repr()
+    precision = resolve_precision(cfg.precision, device.type)
+    checkpoints["generation_precision"] = f"{precision.precision} ({precision.reason})"
     sampler = InteractionSampler(
         net=generator.net.to(device),
         vq=generator.vq.to(device),
         text=generator.text,
         **OmegaConf.to_container(cfg.sampler),
         cuda_graphs=cfg.cuda_graphs,
+        precision=precision.precision,
     )
     generator.text.encoder.to(device)
     if cfg.mode == "interaction":

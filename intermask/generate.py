@@ -52,6 +52,7 @@ from intermask.momask.load import load_momask_sampler
 from intermask.momask.sampler import MoMaskSampler
 from intermask.motion import humanml3d as hml
 from intermask.utils.files import file_hash, open_run_checkpoint
+from intermask.utils.precision import FP32, OPTIONS, resolve_precision
 from intermask.vq.model import FRAMES_PER_STEP
 
 # longest training clips (multiples of 4); HumanML3D: MoMask's 196 frames
@@ -98,6 +99,7 @@ class Settings:
     remask_noise: float = REMASK_NOISE
     batch_size: int = 32
     fps: float = 30.0
+    precision: str = FP32  # or bf16-mixed: the decoding under bf16 autocast
 
 
 @dataclass(frozen=True)
@@ -263,6 +265,7 @@ def generate_samples(
         revisits=settings.revisits,
         partner_scale=settings.partner_scale,
         remask_noise=settings.remask_noise,
+        precision=settings.precision,
     )
     jobs = [(c, k) for c in range(len(captions)) for k in range(samples)]
     fixed_tokens = None
@@ -483,6 +486,7 @@ class Request:
     frames_range: tuple[int, int] | None = None
     person: int | None = None
     device: str | None = None
+    precision: str | None = None  # 32 | bf16 | auto (None: 32)
     out: Path | None = None
     no_render: bool = False
 
@@ -556,6 +560,9 @@ def run(request: Request) -> list[Path]:
         ),
         batch_size=request.batch_size or defaults["batch_size"],
         fps=fps,
+        precision=resolve_precision(
+            OPTIONS[request.precision or "32"], torch.device(device).type
+        ).precision,
     )
     reaction = edit = None
     frames = 0
@@ -672,6 +679,11 @@ def run_momask(request: Request, role: str, defaults: dict[str, Any]) -> list[Pa
         raise ValueError(
             f"--checkpoint {request.checkpoint}: a MoMask residual transformer run; pass the "
             "masked transformer run as --checkpoint and this one as --residual"
+        )
+    if request.precision not in (None, "32"):
+        raise ValueError(
+            f"--precision {request.precision}: MoMask runs decode in fp32 only (--checkpoint "
+            f"{request.checkpoint})"
         )
     given = [option for name, option in INTERM_ONLY.items() if getattr(request, name) is not None]
     if given:

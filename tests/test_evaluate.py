@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import open_dict
 from test_train_arflow import _config as arflow_config
@@ -222,6 +223,52 @@ def test_captions_sharing_a_prefix_or_repeated_get_their_own_folders(runs, tmp_p
     assert recorded == captions
 
 
+def test_generation_precision_is_opt_in_and_named_in_the_header(
+    synthetic_interhuman_root, runs, tmp_path, monkeypatch
+):
+    """fp32 unless the caller asks for bf16 autocast; the table says which, the passes run it."""
+    from intermask.interm.model import InterMTransformer
+
+    seen, forward = [], InterMTransformer.forward_with_condition
+
+    def recording_forward(self, *args, **kwargs):
+        enabled = torch.is_autocast_enabled("cpu")
+        seen.append(torch.get_autocast_dtype("cpu") if enabled else torch.float32)
+        return forward(self, *args, **kwargs)
+
+    monkeypatch.setattr(InterMTransformer, "forward_with_condition", recording_forward)
+    headers = {}
+    for precision in ("32-true", "bf16-mixed"):
+        seen.clear()
+        out = tmp_path / precision
+        cfg = _eval_config(
+            synthetic_interhuman_root, runs, out, "interaction", (f"precision={precision}",)
+        )
+        headers[precision] = evaluate(cfg)["header"]["generation_precision"]
+        wanted = torch.bfloat16 if precision == "bf16-mixed" else torch.float32
+        assert seen and set(seen) == {wanted}
+        table = (out / "results.md").read_text()
+        assert f"- **generation_precision**: {precision} (set explicitly)" in table
+    assert headers == {
+        "32-true": "32-true (set explicitly)",
+        "bf16-mixed": "bf16-mixed (set explicitly)",
+    }
+
+
+def test_the_sampler_refuses_an_unresolved_or_unknown_precision(runs):
+    from intermask.interm.load import load_generator
+    from intermask.interm.sampler import InteractionSampler
+
+    generator = load_generator(runs["gen"])
+    for precision in ("auto", "16-mixed"):
+        with pytest.raises(
+            ValueError, match=f"sampler precision must be one of .*got '{precision}'"
+        ):
+            InteractionSampler(
+                net=generator.net, vq=generator.vq, text=generator.text, precision=precision
+            )
+
+
 def test_the_generate_command_reaches_the_logits_through_each_module_once(
     runs, tmp_path, monkeypatch
 ):
@@ -304,6 +351,24 @@ def test_generate_remask_noise_is_recorded_and_needs_per_sample_noise(runs, tmp_
         "per_sample, got --noise reference"
     )
     _assert_refused(reference, message, tmp_path, capsys)
+
+
+def test_generate_precision_is_recorded_and_defaults_to_fp32(runs, tmp_path):
+    base = ["generate", "--checkpoint", str(runs["gen"]), "--text", "they hug", "--seconds", "1"]
+    base += ["--iterations", "3", "--no-render", "--device", "cpu"]
+    recorded = {}
+    for option in ([], ["--precision", "32"], ["--precision", "bf16"]):
+        out = tmp_path / ("_".join(option) or "default")
+        assert cli([*base, *option, "--out", str(out)]) == 0
+        sample = json.loads((out / "they_hug_00-00" / "sample.json").read_text())
+        recorded[out.name] = sample["settings"]["precision"]
+        features = np.load(out / "they_hug_00-00" / "features.npy")
+        assert features.dtype == np.float32 and np.isfinite(features).all()
+    assert recorded == {
+        "default": "32-true",
+        "--precision_32": "32-true",
+        "--precision_bf16": "bf16-mixed",
+    }
 
 
 def test_generate_partner_guidance_is_recorded_and_refused_together(runs, tmp_path, capsys):

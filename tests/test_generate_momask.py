@@ -255,6 +255,17 @@ def test_edit_options_are_refused_with_a_momask_run(runs, tmp_path):
         gen.run(gen.Request(checkpoint=str(runs["mask"]), text=[CAPTION], person=2))
 
 
+def test_bf16_decoding_is_refused_with_a_momask_run(runs, tmp_path, capsys):
+    code = _generate(runs, tmp_path, "--text", CAPTION, "--precision", "bf16")
+    assert code == 2
+    err = capsys.readouterr().err
+    assert (
+        f"error: --precision bf16: MoMask runs decode in fp32 only (--checkpoint {runs['mask']})"
+        in err
+    )
+    assert not tmp_path.exists() or not any(tmp_path.iterdir())
+
+
 def test_run_kinds_are_checked(runs, tmp_path):
     mask, residual, interm = (str(runs[k]) for k in ("mask", "residual", "interm"))
     with pytest.raises(ValueError) as error:

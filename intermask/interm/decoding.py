@@ -124,7 +124,7 @@ def guided_logits(
 
     def run(a, b, c, lengths):
         out = forward(a, b, c, lengths)
-        return torch.stack([out.logits_a, out.logits_b], dim=1)
+        return torch.stack([out.logits_a, out.logits_b], dim=1).float()  # fp32 under autocast too
 
     return _guided(run, (tokens[:, 0], tokens[:, 1]), condition, null, lengths_in_steps, cfg_scale)
 
@@ -185,7 +185,8 @@ def partner_guided_logits(
         torch.cat(conditions),
         lengths_in_steps.repeat(len(conditions)),
     )
-    logits = torch.stack([out.logits_a, out.logits_b], dim=1).chunk(len(conditions))
+    # guidance and sampling in fp32, also under bf16 autocast (a no-op in fp32)
+    logits = torch.stack([out.logits_a, out.logits_b], dim=1).float().chunk(len(conditions))
     cond, cond_hidden = logits[0], logits[1]
     guided = logits[2] + cfg_scale * (cond - logits[2]) if text_guided else cond
     return guided + partner_scale * (cond - cond_hidden)

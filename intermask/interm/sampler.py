@@ -29,7 +29,10 @@ from intermask.interm.decoding import (
 from intermask.interm.graphs import GraphedForward
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.text.cache import TextFeatureCache
+from intermask.utils.precision import BF16, FP32
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
+
+PRECISIONS = (FP32, BF16)
 
 
 class GeneratedMotion(NamedTuple):
@@ -85,7 +88,10 @@ class InteractionSampler:
     ``persons``, ``revisits``, ``partner_scale`` and ``remask_noise`` default to the paper's inference settings
     (section 3.3, appendix C.1). ``cuda_graphs``: on a CUDA device, each shape of decoding pass
     is captured once as a CUDA graph and replayed (:mod:`intermask.interm.graphs`; the same
-    kernels, so the same tokens); it does nothing elsewhere.
+    kernels, so the same tokens); it does nothing elsewhere. ``precision``: ``32-true`` (the
+    default) or ``bf16-mixed``, which runs the decoding passes and the VQ decoding under bf16
+    autocast on the sampler's device. bf16 changes the numbers (other codes win near ties), so it
+    is a choice the caller makes and labels; the outputs are fp32 either way.
     """
 
     def __init__(
@@ -105,8 +111,15 @@ class InteractionSampler:
         partner_scale: float = PARTNER_SCALE,
         remask_noise: float = REMASK_NOISE,
         cuda_graphs: bool = True,
+        precision: str = FP32,
     ) -> None:
+        if precision not in PRECISIONS:
+            raise ValueError(
+                f"sampler precision must be one of {PRECISIONS} (resolve 'auto' first with "
+                f"intermask.utils.precision.resolve_precision), got {precision!r}"
+            )
         self.net, self.vq, self.text = net, vq, text
+        self.precision = precision
         self.forward = GraphedForward(net, enabled=cuda_graphs)
         self.iterations, self.cfg_scale = iterations, cfg_scale
         self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
@@ -147,26 +160,27 @@ class InteractionSampler:
         """
         steps = checked_steps(captions, lengths, self.device)
         text = None if captions is None else self.text_features(captions)
-        tokens = generate(
-            self.net,
-            text,
-            steps,
-            iterations=iterations or self.iterations,
-            cfg_scale=self.cfg_scale,
-            top_k_ratio=self.top_k_ratio,
-            temperature=self.temperature,
-            schedule=self.schedule,
-            noise=self.noise,
-            persons=self.persons,
-            revisits=self.revisits,
-            partner_scale=self.partner_scale,
-            remask_noise=self.remask_noise,
-            seeds=seeds,
-            reference_tokens=reference_tokens,
-            edit=edit,
-            forward=self.forward,
-        )
-        normalized = decode_tokens(self.vq, tokens)
+        with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.precision == BF16):
+            tokens = generate(
+                self.net,
+                text,
+                steps,
+                iterations=iterations or self.iterations,
+                cfg_scale=self.cfg_scale,
+                top_k_ratio=self.top_k_ratio,
+                temperature=self.temperature,
+                schedule=self.schedule,
+                noise=self.noise,
+                persons=self.persons,
+                revisits=self.revisits,
+                partner_scale=self.partner_scale,
+                remask_noise=self.remask_noise,
+                seeds=seeds,
+                reference_tokens=reference_tokens,
+                edit=edit,
+                forward=self.forward,
+            )
+            normalized = decode_tokens(self.vq, tokens).float()
         joints = joints_from_features(self.vq, normalized)
         flat = rearrange(normalized, "b p t ... -> (b p) t ...")
         features = rearrange(self.vq.view.denormalize(flat), "(b p) t ... -> b p t ...", p=2)

@@ -17,6 +17,8 @@ import torch
 AUTO = "auto"
 BF16 = "bf16-mixed"
 FP32 = "32-true"
+# the command-line spelling (`make bench`, `intermask generate --precision`) -> the Trainer's
+OPTIONS = {"32": FP32, "bf16": BF16, "auto": AUTO}
 # torch.cpu.get_capabilities() flags that mean native bf16 arithmetic (x86, then ARM)
 NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16", "bf16", "sve_bf16")
 
