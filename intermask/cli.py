@@ -283,7 +283,7 @@ def _add_generate_parser(commands) -> None:
     parser.add_argument("--device", help="cpu, cuda, cuda:1 ... (default: cuda when available)")
     parser.add_argument(
         "--precision",
-        choices=("32", "bf16", "auto"),
+        choices=("32", "bf16", "auto"),  # intermask.utils.precision.OPTIONS (torch-free here)
         help="Inter-M decoding: 32 (the default), bf16 autocast (other numbers; recorded in "
         "sample.json) or auto (bf16 where the device has native bf16)",
     )

@@ -104,6 +104,12 @@ def _guided(
     return uncond + cfg_scale * (cond - uncond)
 
 
+def _both_persons(out: InterMOutput) -> torch.Tensor:
+    """(B, 2, rows, T', K) logits of both persons in fp32: guidance, top-k and sampling read
+    fp32 under bf16 autocast too (a no-op in fp32)."""
+    return torch.stack([out.logits_a, out.logits_b], dim=1).float()
+
+
 def guided_logits(
     model: InterMTransformer,
     tokens: torch.Tensor,
@@ -123,8 +129,7 @@ def guided_logits(
     forward = forward or model.forward_with_condition
 
     def run(a, b, c, lengths):
-        out = forward(a, b, c, lengths)
-        return torch.stack([out.logits_a, out.logits_b], dim=1).float()  # fp32 under autocast too
+        return _both_persons(forward(a, b, c, lengths))
 
     return _guided(run, (tokens[:, 0], tokens[:, 1]), condition, null, lengths_in_steps, cfg_scale)
 
@@ -185,8 +190,7 @@ def partner_guided_logits(
         torch.cat(conditions),
         lengths_in_steps.repeat(len(conditions)),
     )
-    # guidance and sampling in fp32, also under bf16 autocast (a no-op in fp32)
-    logits = torch.stack([out.logits_a, out.logits_b], dim=1).float().chunk(len(conditions))
+    logits = _both_persons(out).chunk(len(conditions))
     cond, cond_hidden = logits[0], logits[1]
     guided = logits[2] + cfg_scale * (cond - logits[2]) if text_guided else cond
     return guided + partner_scale * (cond - cond_hidden)

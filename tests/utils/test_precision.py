@@ -160,3 +160,15 @@ def test_demo_experiments_thread_counts(job, experiment, threads):
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose(job, overrides=[f"experiment={experiment}"])
     assert cfg.threads == threads
+
+
+def test_generate_precision_choices_are_the_precision_options():
+    """`intermask generate --precision` spells its choices without importing torch; they must
+    stay the keys of intermask.utils.precision.OPTIONS, which the job maps them through."""
+    from intermask.cli import build_parser
+    from intermask.utils.precision import OPTIONS
+
+    parser = build_parser()
+    generate = next(action.choices["generate"] for action in parser._actions if action.choices)
+    option = next(a for a in generate._actions if "--precision" in a.option_strings)
+    assert sorted(option.choices) == sorted(OPTIONS) == ["32", "auto", "bf16"]
