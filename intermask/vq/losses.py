@@ -28,6 +28,10 @@ ARM_JOINTS: tuple[int, ...] = tuple(
 TORSO_JOINTS: tuple[int, ...] = tuple(
     JOINT_NAMES.index(name) for name in ("spine3", "neck", "head")
 )
+# the joints a ``legs`` loss weighs: the knees and ankles, whose rise off the ground is a kick
+LEG_JOINTS: tuple[int, ...] = tuple(
+    JOINT_NAMES.index(name) for name in ("l_knee", "r_knee", "l_ankle", "r_ankle")
+)
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,10 @@ class LossWeights:
     # not in the paper (0 = off): the upper spine's, neck's and head's positions relative to the
     # pelvis, so a bow's lean (0.2 rad, a head 0.15 m forward) is not within the code error
     torso: float = 0.0
+    # not in the paper (0 = off): the knees' and ankles' positions relative to the pelvis, so a
+    # kick (an ankle 0.3-0.5 m above the other, in a few frames of 1% of the windows) is not
+    # averaged away by the standing legs of every other window
+    legs: float = 0.0
 
 
 class LossTerms(NamedTuple):
@@ -61,6 +69,7 @@ class LossTerms(NamedTuple):
     commitment: torch.Tensor
     arms: torch.Tensor
     torso: torch.Tensor
+    legs: torch.Tensor
 
 
 def elementwise_loss(
@@ -99,8 +108,8 @@ def vq_losses(
 
     prediction, target: (B, T, *F) normalized features; reconstruction_mask: (*F) bool;
     frame_mask: (B, T) bool, False on padding; geometries from the representation view.
-    Terms whose geometry is missing (Inter-X without a body model) are 0. A geodesic, arms or
-    torso term of weight 0 is measured without a graph, and only when ``measure_unweighted``
+    Terms whose geometry is missing (Inter-X without a body model) are 0. A geodesic, arms,
+    torso or legs term of weight 0 is measured without a graph, and only when ``measure_unweighted``
     (else 0): the geodesic costs ~12% of a CPU demo step for nothing the optimizer uses.
     """
     zero = prediction.new_zeros(())
@@ -118,7 +127,7 @@ def vq_losses(
             frame_mask,
         ),
     )
-    positions = velocity = bones = foot_contact = arms = torso = zero
+    positions = velocity = bones = foot_contact = arms = torso = legs = zero
     if predicted_geometry.positions is not None and target_geometry.positions is not None:
         predicted, real = predicted_geometry.positions, target_geometry.positions
         positions = _masked_mean(elementwise_loss(predicted, real, kind), frame_mask)
@@ -136,6 +145,12 @@ def vq_losses(
             measure_unweighted,
             zero,
             lambda: _pelvis_relative(predicted, real, TORSO_JOINTS, kind, frame_mask),
+        )
+        legs = _measured(
+            weights.legs,
+            measure_unweighted,
+            zero,
+            lambda: _pelvis_relative(predicted, real, LEG_JOINTS, kind, frame_mask),
         )
         bones = _masked_mean(
             elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
@@ -157,6 +172,7 @@ def vq_losses(
         + weights.commitment * commit_loss
         + weights.arms * arms
         + weights.torso * torso
+        + weights.legs * legs
     )
     return LossTerms(
         total,
@@ -169,6 +185,7 @@ def vq_losses(
         commit_loss,
         arms,
         torso,
+        legs,
     )
 
 

@@ -227,6 +227,29 @@ def test_torso_term_measures_the_upper_spine_neck_and_head_relative_to_the_pelvi
     assert _losses(view, target, target).torso.item() == 0.0
 
 
+def test_legs_term_measures_the_knees_and_ankles_relative_to_the_pelvis():
+    view, target = _geometry_pair()
+    prediction = target.clone()
+    positions = prediction[..., ih.POSITIONS].reshape(2, 8, 22, 3)
+    positions[..., :, 1] += 0.4  # the whole body lifted: nothing changes relative to the pelvis
+    positions[..., JOINT_NAMES.index("r_ankle"), 1] += 0.12  # the right ankle 12 cm up: a kick
+    positions[..., JOINT_NAMES.index("head"), 2] += 0.03  # a torso joint: not the legs'
+    prediction[..., ih.POSITIONS] = positions.flatten(-2)
+    off = _losses(view, prediction, target, kind="l1")
+    # one joint of the four leg joints, one axis of three
+    assert off.legs.item() == pytest.approx(0.12 / 12, rel=1e-4)
+    assert off.torso.item() == pytest.approx(0.03 / 9, rel=1e-4)
+    assert off.arms.item() == pytest.approx(0.0, abs=1e-7)  # float32 rounding of the lift
+    assert not off.legs.requires_grad  # weight 0: measured without a graph
+    weighted = _losses(view, prediction, target, kind="l1", weights=LossWeights(legs=20.0))
+    assert weighted.total.item() == pytest.approx(
+        off.total.item() + 20.0 * off.legs.item(), rel=1e-5
+    )
+    skipped = _losses(view, prediction, target, kind="l1", measure_unweighted=False)
+    assert skipped.legs.item() == 0.0
+    assert _losses(view, target, target).legs.item() == 0.0
+
+
 def test_foot_contact_penalises_sliding_planted_feet_only():
     view, target = _geometry_pair()
     target[..., ih.POSITIONS] = 0.0
