@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Literal, NamedTuple
 
 import torch
@@ -32,6 +33,12 @@ TORSO_JOINTS: tuple[int, ...] = tuple(
 LEG_JOINTS: tuple[int, ...] = tuple(
     JOINT_NAMES.index(name) for name in ("l_knee", "r_knee", "l_ankle", "r_ankle")
 )
+# each pelvis-relative term (a LossWeights and a LossTerms field) and the joints it weighs
+PELVIS_RELATIVE_TERMS: dict[str, tuple[int, ...]] = {
+    "arms": ARM_JOINTS,
+    "torso": TORSO_JOINTS,
+    "legs": LEG_JOINTS,
+}
 
 
 @dataclass(frozen=True)
@@ -127,31 +134,21 @@ def vq_losses(
             frame_mask,
         ),
     )
-    positions = velocity = bones = foot_contact = arms = torso = legs = zero
+    positions = velocity = bones = foot_contact = zero
+    relative = dict.fromkeys(PELVIS_RELATIVE_TERMS, zero)
     if predicted_geometry.positions is not None and target_geometry.positions is not None:
         predicted, real = predicted_geometry.positions, target_geometry.positions
         positions = _masked_mean(elementwise_loss(predicted, real, kind), frame_mask)
         step_mask = frame_mask[:, 1:] & frame_mask[:, :-1]
         predicted_step, real_step = predicted[:, 1:] - predicted[:, :-1], real[:, 1:] - real[:, :-1]
         velocity = _masked_mean(elementwise_loss(predicted_step, real_step, kind), step_mask)
-        arms = _measured(
-            weights.arms,
-            measure_unweighted,
-            zero,
-            lambda: _pelvis_relative(predicted, real, ARM_JOINTS, kind, frame_mask),
-        )
-        torso = _measured(
-            weights.torso,
-            measure_unweighted,
-            zero,
-            lambda: _pelvis_relative(predicted, real, TORSO_JOINTS, kind, frame_mask),
-        )
-        legs = _measured(
-            weights.legs,
-            measure_unweighted,
-            zero,
-            lambda: _pelvis_relative(predicted, real, LEG_JOINTS, kind, frame_mask),
-        )
+        for name, joints in PELVIS_RELATIVE_TERMS.items():
+            relative[name] = _measured(
+                getattr(weights, name),
+                measure_unweighted,
+                zero,
+                partial(_pelvis_relative, predicted, real, joints, kind, frame_mask),
+            )
         bones = _masked_mean(
             elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
         )
@@ -170,22 +167,19 @@ def vq_losses(
         + weights.geodesic * geodesic
         + weights.foot_contact * foot_contact
         + weights.commitment * commit_loss
-        + weights.arms * arms
-        + weights.torso * torso
-        + weights.legs * legs
     )
+    for name, term in relative.items():  # added one by one, in order: the same rounding as ever
+        total = total + getattr(weights, name) * term
     return LossTerms(
-        total,
-        reconstruction,
-        positions,
-        velocity,
-        bones,
-        geodesic,
-        foot_contact,
-        commit_loss,
-        arms,
-        torso,
-        legs,
+        total=total,
+        reconstruction=reconstruction,
+        positions=positions,
+        velocity=velocity,
+        bone_length=bones,
+        geodesic=geodesic,
+        foot_contact=foot_contact,
+        commitment=commit_loss,
+        **relative,
     )
 
 
