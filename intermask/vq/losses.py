@@ -7,9 +7,10 @@ normalized values, which mixes per-dimension scales into a geometric quantity; w
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
+from types import MappingProxyType
 from typing import Literal, NamedTuple
 
 import torch
@@ -34,11 +35,9 @@ LEG_JOINTS: tuple[int, ...] = tuple(
     JOINT_NAMES.index(name) for name in ("l_knee", "r_knee", "l_ankle", "r_ankle")
 )
 # each pelvis-relative term (a LossWeights and a LossTerms field) and the joints it weighs
-PELVIS_RELATIVE_TERMS: dict[str, tuple[int, ...]] = {
-    "arms": ARM_JOINTS,
-    "torso": TORSO_JOINTS,
-    "legs": LEG_JOINTS,
-}
+PELVIS_RELATIVE_TERMS: Mapping[str, tuple[int, ...]] = MappingProxyType(
+    {"arms": ARM_JOINTS, "torso": TORSO_JOINTS, "legs": LEG_JOINTS}
+)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
 import math
+from dataclasses import fields
 
 import pytest
 import torch
@@ -7,7 +8,7 @@ from intermask.motion import interhuman as ih
 from intermask.motion.rotations import matrix_to_rot6d, rot6d_to_matrix, rotation_about_axis
 from intermask.motion.skeleton import JOINT_NAMES, REST_OFFSETS
 from intermask.vq.convolutions import MotionDecoder, MotionEncoder
-from intermask.vq.losses import LossWeights, vq_losses
+from intermask.vq.losses import PELVIS_RELATIVE_TERMS, LossTerms, LossWeights, vq_losses
 from intermask.vq.model import MotionVQVAE
 from intermask.vq.quantizers import ResidualQuantizer
 from intermask.vq.views import InterHumanView, InterXView
@@ -225,6 +226,17 @@ def test_torso_term_measures_the_upper_spine_neck_and_head_relative_to_the_pelvi
     skipped = _losses(view, prediction, target, kind="l1", measure_unweighted=False)
     assert (skipped.torso.item(), skipped.arms.item()) == (0.0, 0.0)
     assert _losses(view, target, target).torso.item() == 0.0
+
+
+def test_every_pelvis_relative_term_is_a_weight_and_a_logged_term_of_its_own_joints():
+    weights = {field.name for field in fields(LossWeights)}
+    for name, joints in PELVIS_RELATIVE_TERMS.items():
+        assert name in weights and name in LossTerms._fields, name
+        assert 0 not in joints, name  # never the pelvis itself: the terms are relative to it
+    # the joint sets are disjoint: a joint weighed twice would be a term's share counted twice
+    every = [joint for joints in PELVIS_RELATIVE_TERMS.values() for joint in joints]
+    assert len(every) == len(set(every)) == 11
+    assert list(PELVIS_RELATIVE_TERMS) == ["arms", "torso", "legs"]  # the order of the sum
 
 
 def test_legs_term_measures_the_knees_and_ankles_relative_to_the_pelvis():
