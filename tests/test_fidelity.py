@@ -144,6 +144,5 @@ def test_the_pelvis_relative_vq_losses_are_the_demos_not_the_papers():
     # the memorisation check's 14 of 14 were measured before the torso term (docs/learning.md)
     assert (weights["overfit_vq"].arms, weights["overfit_vq"].torso) == (20.0, 0.0)
     table = Path(CONFIG_DIR).parent.joinpath("docs", "fidelity.md").read_text()
-    switches = ("arms", "torso", "legs")
-    for switch in (f"`model.loss_weights.{name}`" for name in switches):
-        assert switch in table, switch
+    for name in ("arms", "torso", "legs"):
+        assert f"`model.loss_weights.{name}`" in table, name
