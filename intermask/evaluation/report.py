@@ -62,6 +62,47 @@ def markdown_table(result: ProtocolResult) -> str:
     return "\n".join(lines) + "\n"
 
 
+def action_table(result: ProtocolResult) -> str:
+    """Per action, each row's success rate and the check its motions fail most often, as a
+    Markdown table (empty when no row has per-action success): ``38 (hand_gap<=hand_gap 62)``
+    reads "38% pass; 62% of this action's motions fail hand_gap <= hand_gap"."""
+    rows = [row for row, metrics in result.rows.items() if any(_is_action(k) for k in metrics)]
+    actions = list(
+        dict.fromkeys(
+            key.split("/", 1)[1] for row in rows for key in result.rows[row] if _is_action(key)
+        )
+    )
+    if not actions:
+        return ""
+    lines = [
+        "Success % per action; in brackets the check most of its motions fail, and the % failing it:",
+        "",
+        "| Action | " + " | ".join(rows) + " |",
+        "|---|" + "---|" * len(rows),
+    ]
+    for action in actions:
+        cells = []
+        for row in rows:
+            metrics = result.rows[row]
+            rate = metrics.get(f"success/{action}")
+            if rate is None:
+                cells.append("-")
+                continue
+            prefix = f"fails/{action}/"
+            fails = {k[len(prefix) :]: v.mean for k, v in metrics.items() if k.startswith(prefix)}
+            worst = max(fails, key=fails.get, default=None)
+            cell = f"{100 * rate.mean:.0f}"
+            if worst is not None and fails[worst] > 0:
+                cell += f" ({worst} {100 * fails[worst]:.0f})"
+            cells.append(cell)
+        lines.append(f"| {action} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _is_action(key: str) -> bool:
+    return key.startswith("success/")
+
+
 def _title(result: ProtocolResult) -> str:
     header = result.header
     fast = (
@@ -81,5 +122,6 @@ def write_results(result: ProtocolResult, directory: str | Path) -> tuple[Path, 
     directory.mkdir(parents=True, exist_ok=True)
     json_path, markdown_path = directory / "results.json", directory / "results.md"
     json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
-    markdown_path.write_text(markdown_table(result))
+    actions = action_table(result)
+    markdown_path.write_text(markdown_table(result) + (f"\n{actions}" if actions else ""))
     return json_path, markdown_path

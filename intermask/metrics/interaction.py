@@ -97,6 +97,11 @@ class Check(NamedTuple):
         value, limit = signals[self.signal], getattr(thresholds, self.threshold)
         return value >= limit if self.above else value <= limit
 
+    @property
+    def name(self) -> str:
+        """``signal>=threshold`` or ``signal<=threshold``: the check's name in reports."""
+        return f"{self.signal}{'>=' if self.above else '<='}{self.threshold}"
+
 
 def _above(signal: str, threshold: str) -> Check:
     return Check(signal, True, threshold)
@@ -356,20 +361,34 @@ def measure(
     return signals
 
 
+def failed_checks(
+    joints: torch.Tensor, *, action: str, actor: int | None, thresholds: SuccessThresholds
+) -> tuple[Check, ...]:
+    """The checks of ``action`` that ``joints (T, 2, 22, 3)`` (the valid frames only) fails, in
+    ``CHECKS`` order: empty when it shows the action.
+
+    actor: 0 or 1 (an index), or None when unknown (generated motion): then either person may
+    be the actor, and a motion that fails both ways reports the reading with fewer failures (the
+    first person as the actor on a tie).
+    """
+    fewest: tuple[Check, ...] | None = None
+    for index in (0, 1) if actor is None else (actor,):
+        signals = measure(joints, action=action, actor=index, thresholds=thresholds)
+        failed = tuple(check for check in CHECKS[action] if not check.passes(signals, thresholds))
+        if not failed:
+            return ()
+        if fewest is None or len(failed) < len(fewest):
+            fewest = failed
+    assert fewest is not None
+    return fewest
+
+
 def passes(
     joints: torch.Tensor, *, action: str, actor: int | None, thresholds: SuccessThresholds
 ) -> bool:
-    """Whether ``joints (T, 2, 22, 3)`` (the valid frames only) shows ``action``.
-
-    actor: 0 or 1 (an index), or None when unknown (generated motion): then either person may
-    be the actor.
-    """
-    checks = CHECKS[action]
-    for index in (0, 1) if actor is None else (actor,):
-        signals = measure(joints, action=action, actor=index, thresholds=thresholds)
-        if all(check.passes(signals, thresholds) for check in checks):
-            return True
-    return False
+    """Whether ``joints (T, 2, 22, 3)`` (the valid frames only) shows ``action`` (see
+    :func:`failed_checks`, whose ``actor`` this takes)."""
+    return not failed_checks(joints, action=action, actor=actor, thresholds=thresholds)
 
 
 def _check_batch(
@@ -407,6 +426,33 @@ def _check_batch(
         )
 
 
+def interaction_failures(
+    joints: torch.Tensor,
+    lengths: torch.Tensor,
+    action_ids: torch.Tensor,
+    actors: torch.Tensor | None = None,
+    *,
+    thresholds: SuccessThresholds | None = None,
+) -> torch.Tensor:
+    """Per-sample failed checks of the action each motion should show, as bits: bit ``i`` is set
+    when the motion fails ``CHECKS[action][i]`` (:func:`failed_checks`); 0 when it succeeds.
+
+    joints: (B, T, 2, 22, 3) metres, Y up; lengths: (B,) valid frames; action_ids: (B,) indices
+    into ``ACTIONS``; actors: (B,) 1 or 2 (the acting person, in the joints' person order) or 0,
+    or None for all, when unknown (generated motion: either person may act). -> (B,) int64.
+    """
+    _check_batch(joints, lengths, action_ids, actors)
+    thresholds = thresholds or SuccessThresholds()
+    masks = []
+    for index in range(joints.shape[0]):
+        actor = None if actors is None or int(actors[index]) == 0 else int(actors[index]) - 1
+        valid = joints[index, : int(lengths[index])].detach().cpu()
+        action = ACTIONS[int(action_ids[index])]
+        failed = failed_checks(valid, action=action, actor=actor, thresholds=thresholds)
+        masks.append(sum(1 << CHECKS[action].index(check) for check in failed))
+    return torch.tensor(masks, dtype=torch.int64, device=joints.device)
+
+
 def interaction_success(
     joints: torch.Tensor,
     lengths: torch.Tensor,
@@ -415,18 +461,7 @@ def interaction_success(
     *,
     thresholds: SuccessThresholds | None = None,
 ) -> torch.Tensor:
-    """Per-sample success of the action each motion should show.
-
-    joints: (B, T, 2, 22, 3) metres, Y up; lengths: (B,) valid frames; action_ids: (B,) indices
-    into ``ACTIONS``; actors: (B,) 1 or 2 (the acting person, in the joints' person order) or 0,
-    or None for all, when unknown (generated motion: either person may act). -> (B,) bool.
-    """
-    _check_batch(joints, lengths, action_ids, actors)
-    thresholds = thresholds or SuccessThresholds()
-    outcomes = []
-    for index in range(joints.shape[0]):
-        actor = None if actors is None or int(actors[index]) == 0 else int(actors[index]) - 1
-        valid = joints[index, : int(lengths[index])].detach().cpu()
-        action = ACTIONS[int(action_ids[index])]
-        outcomes.append(passes(valid, action=action, actor=actor, thresholds=thresholds))
-    return torch.tensor(outcomes, dtype=torch.bool, device=joints.device)
+    """Per-sample success of the action each motion should show: :func:`interaction_failures`
+    (same arguments) without a failed check. -> (B,) bool."""
+    failures = interaction_failures(joints, lengths, action_ids, actors, thresholds=thresholds)
+    return failures == 0

@@ -1,9 +1,11 @@
 """Interaction success: the share of motions that show their action, overall and per action.
 
 The predicates and their thresholds are in :mod:`intermask.metrics.interaction`; this class only
-accumulates their outcomes. Like FID and Diversity it keeps one row per sample (outcome, action,
-sample id) rather than running sums, so the padded duplicates a ``DistributedSampler`` adds can
-be dropped by id at ``compute`` (:mod:`intermask.metrics.dedup`); a row is three integers.
+accumulates their outcomes: which checks each motion fails (so a report can say why an action
+fails, not only how often). Like FID and Diversity it keeps one row per sample (failed checks,
+action, sample id) rather than running sums, so the padded duplicates a ``DistributedSampler``
+adds can be dropped by id at ``compute`` (:mod:`intermask.metrics.dedup`); a row is three
+integers.
 """
 
 from __future__ import annotations
@@ -14,23 +16,38 @@ import torch
 from torchmetrics import Metric
 
 from intermask.metrics.dedup import gather_samples, sample_id_column
-from intermask.metrics.interaction import ACTIONS, SuccessThresholds, interaction_success
+from intermask.metrics.interaction import (
+    ACTIONS,
+    CHECKS,
+    SuccessThresholds,
+    interaction_failures,
+)
+
+MAX_CHECKS = max(len(checks) for checks in CHECKS.values())
 
 
 class SuccessRates(NamedTuple):
     """overall: () success rate; per_action: (A,) rates in ``ACTIONS`` order, NaN for an action
-    without samples; counts: (A,) samples per action."""
+    without samples; counts: (A,) samples per action; failures: (A, MAX_CHECKS) share of each
+    action's samples that fail ``CHECKS[action][i]``, NaN past the action's checks or without
+    samples (a sample can fail several checks)."""
 
     overall: torch.Tensor
     per_action: torch.Tensor
     counts: torch.Tensor
+    failures: torch.Tensor
 
     def as_dict(self) -> dict[str, float]:
-        """``{"success": rate, "success/<action>": rate, ...}`` for the actions with samples."""
+        """``{"success": rate, "success/<action>": rate, "fails/<action>/<check>": rate, ...}``
+        for the actions with samples, every check of theirs (``Check.name``)."""
         values = {"success": float(self.overall)}
         for action, rate, count in zip(ACTIONS, self.per_action, self.counts, strict=True):
             if int(count):
                 values[f"success/{action}"] = float(rate)
+        for index, (action, count) in enumerate(zip(ACTIONS, self.counts, strict=True)):
+            if int(count):
+                for slot, check in enumerate(CHECKS[action]):
+                    values[f"fails/{action}/{check.name}"] = float(self.failures[index, slot])
         return values
 
 
@@ -62,20 +79,28 @@ class InteractionSuccess(Metric):
         *,
         sample_ids: torch.Tensor | None = None,
     ) -> None:
-        passed = interaction_success(
+        failed = interaction_failures(
             joints, lengths, action_ids, actors, thresholds=self.thresholds
         )
         ids = sample_id_column(
             sample_ids, joints.shape[0], metric="InteractionSuccess", device=self.device
         )
-        rows = torch.stack((passed.long().to(self.device), action_ids.long().to(self.device)), -1)
-        self.outcomes.append(rows)  # (B, 2): passed, action id
+        rows = torch.stack((failed.to(self.device), action_ids.long().to(self.device)), -1)
+        self.outcomes.append(rows)  # (B, 2): failed checks as bits, action id
         self.sample_ids.append(ids)
 
     def compute(self) -> SuccessRates:
         rows = gather_samples(self.outcomes, self.sample_ids, metric="InteractionSuccess")
-        passed, actions = rows[:, 0].double(), rows[:, 1]
+        failed, actions = rows[:, 0], rows[:, 1]
+        passed = (failed == 0).double()
         counts = torch.bincount(actions, minlength=len(ACTIONS)).double()
         hits = torch.bincount(actions, weights=passed, minlength=len(ACTIONS))
         per_action = torch.where(counts > 0, hits / counts.clamp_min(1), torch.nan)
-        return SuccessRates(passed.mean(), per_action, counts.long())
+        bits = (failed[:, None] >> torch.arange(MAX_CHECKS, device=failed.device)) & 1  # (N, K)
+        shape = (len(ACTIONS), MAX_CHECKS)
+        failures = torch.full(shape, torch.nan, dtype=torch.float64, device=failed.device)
+        for index, action in enumerate(ACTIONS):
+            if counts[index]:
+                slots = len(CHECKS[action])
+                failures[index, :slots] = bits[actions == index, :slots].double().mean(0)
+        return SuccessRates(passed.mean(), per_action, counts.long(), failures)

@@ -18,7 +18,7 @@ from intermask.evaluation.protocol import (
     repeat_items,
     sample_seeds,
 )
-from intermask.evaluation.report import format_summary, markdown_table, write_results
+from intermask.evaluation.report import action_table, format_summary, markdown_table, write_results
 
 ITEMS, FRAMES, DIM = 48, 8, 6
 
@@ -308,7 +308,19 @@ def test_labelled_batches_give_every_row_with_positions_a_success_column():
     assert "Success % ↑" in table
     assert table.splitlines()[-4].endswith("| 100.0±0.0 |")  # the GT row
     assert table.splitlines()[-1].endswith("| - |")  # no positions
+    # per action: each row's rate and the check its motions fail most (the share failing it)
+    actions = action_table(result).splitlines()
+    assert actions[2] == "| Action | Ground Truth | Frozen reactor | Swapped |"
+    assert actions[4:] == [
+        "| handshake | 100 | 0 (hand_gap<=hand_gap 100) | 100 |",
+        "| push | 100 | 0 (recoil>=push_recoil 100) | 100 |",
+        "| wave | 100 | 0 (reactor_raise>=raise_height 100) | 100 |",
+        "| walk_meet | 100 | 0 (reactor_travel>=walked 100) | 100 |",
+    ]
+    assert frozen["fails/handshake/hand_gap<=hand_gap"].mean == 1.0
+    assert frozen["fails/handshake/spacing>=spacing"].mean == 0.0
     unlabelled = {k: v for k, v in split.items() if k != "action"}
     plain = _success_runner(unlabelled, [Truth()]).run({})
     assert "success" not in plain.rows["Ground Truth"]
     assert "Success" not in markdown_table(plain)
+    assert action_table(plain) == ""

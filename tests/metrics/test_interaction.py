@@ -15,7 +15,10 @@ from intermask.metrics.interaction import (
     ACTIONS,
     CHECKS,
     THRESHOLD_NAMES,
+    Check,
     SuccessThresholds,
+    failed_checks,
+    interaction_failures,
     interaction_success,
     measure,
     passes,
@@ -166,3 +169,51 @@ def test_bad_inputs_are_reported():
         SuccessThresholds(meet_gap_low=2.0, meet_gap_high=1.0)
     with pytest.raises(ValueError, match="unknown action 'tango'"):
         measure(joints[0], action="tango", actor=0, thresholds=THRESHOLDS)
+
+
+def _names(checks: tuple[Check, ...]) -> list[str]:
+    return [check.name for check in checks]
+
+
+def test_failed_checks_name_what_a_motion_misses(clips):
+    joints, actor = clips["handshake"]
+    assert failed_checks(joints, action="handshake", actor=actor, thresholds=THRESHOLDS) == ()
+    # a handshake read as a high five misses only the height of the contact
+    for who in (actor, None):
+        missed = failed_checks(joints, action="high_five", actor=who, thresholds=THRESHOLDS)
+        assert _names(missed) == ["contact_height>=high_contact"]
+    # the roles swapped: the reactor's hand arrives first
+    swapped = failed_checks(joints, action="handshake", actor=1 - actor, thresholds=THRESHOLDS)
+    assert _names(swapped) == ["arrival_lead>=lead"]
+    # a frozen reactor: no contact, and with the roles given, the actor's hand is not there first;
+    # with the actor unknown the reading with fewer failures is reported
+    frozen = _frozen(joints, 1 - actor)
+    given = failed_checks(frozen, action="handshake", actor=actor, thresholds=THRESHOLDS)
+    assert _names(given) == ["hand_gap<=hand_gap", "arrival_lead>=lead"]
+    unknown = failed_checks(frozen, action="handshake", actor=None, thresholds=THRESHOLDS)
+    assert _names(unknown) == ["hand_gap<=hand_gap"]
+
+
+def test_failures_are_bits_of_the_actions_checks(clips):
+    assert all(len(set(checks)) == len(checks) for checks in CHECKS.values())
+    handshake, actor = clips["handshake"]
+    high_five, high_five_actor = clips["high_five"]
+    frames = max(len(handshake), len(high_five))
+    joints = torch.zeros(3, frames, 2, 22, 3, dtype=torch.float64)
+    joints[0, : len(handshake)] = handshake
+    joints[1, : len(handshake)] = _frozen(handshake, 1 - actor)
+    joints[2, : len(high_five)] = high_five
+    lengths = torch.tensor([len(handshake), len(handshake), len(high_five)])
+    action_ids = torch.full((3,), ACTIONS.index("handshake"))
+    actors = torch.tensor([actor + 1, actor + 1, high_five_actor + 1])
+    failures = interaction_failures(joints, lengths, action_ids, actors, thresholds=THRESHOLDS)
+    # handshake checks: hand_gap (bit 0), arrival_lead (1), contact_height (2), spacing (3)
+    assert _names(CHECKS["handshake"]) == [
+        "hand_gap<=hand_gap",
+        "arrival_lead>=lead",
+        "contact_height<=low_contact",
+        "spacing>=spacing",
+    ]
+    assert failures.tolist() == [0, 0b0011, 0b0100]
+    success = interaction_success(joints, lengths, action_ids, actors, thresholds=THRESHOLDS)
+    assert success.tolist() == [True, False, False]

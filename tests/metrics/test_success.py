@@ -15,7 +15,7 @@ from torch.utils.data import DistributedSampler
 from intermask.data.common import single_threaded
 from intermask.data.synthetic import generate_clip
 from intermask.metrics import InteractionSuccess
-from intermask.metrics.interaction import ACTIONS, interaction_success
+from intermask.metrics.interaction import ACTIONS, CHECKS, interaction_success
 
 CHOSEN = ("handshake", "wave", "chase", "bow", "push")
 
@@ -70,7 +70,34 @@ def test_rates_equal_the_plain_computation(batch):
     values = rates.as_dict()
     assert values["success"] == pytest.approx(0.5)
     assert values["success/handshake"] == pytest.approx(0.5)
-    assert set(values) == {"success"} | {f"success/{a}" for a in CHOSEN}
+    fails = {f"fails/{a}/{check.name}" for a in CHOSEN for check in CHECKS[a]}
+    assert set(values) == {"success"} | {f"success/{a}" for a in CHOSEN} | fails
+
+
+def test_failure_shares_name_the_checks_the_frozen_reactors_miss(batch):
+    metric = InteractionSuccess()
+    metric.update(batch["joints"], batch["lengths"], batch["action_ids"], batch["actors"])
+    rates = metric.compute()
+    values = rates.as_dict()
+    # one clip of two per action has its reactor frozen: it misses the reactor's part
+    missed = {
+        "handshake": {"hand_gap<=hand_gap", "arrival_lead>=lead"},
+        "wave": {"reactor_raise>=raise_height"},
+        "chase": {"chase_run>=run", "min_distance>=escape", "spacing>=spacing"},
+        "bow": {"reactor_bow>=bow_pitch"},
+        "push": {"recoil>=push_recoil"},
+    }
+    for action, names in missed.items():
+        for check in CHECKS[action]:
+            expected = 0.5 if check.name in names else 0.0
+            assert values[f"fails/{action}/{check.name}"] == expected, (action, check.name)
+    for index, action in enumerate(ACTIONS):
+        row = rates.failures[index]
+        if action in missed:
+            assert not row[: len(CHECKS[action])].isnan().any()
+            assert row[len(CHECKS[action]) :].isnan().all()  # past the action's checks
+        else:
+            assert row.isnan().all()  # no samples
 
 
 def test_duplicated_sample_ids_count_once(batch):
