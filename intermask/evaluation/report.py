@@ -63,9 +63,11 @@ def markdown_table(result: ProtocolResult) -> str:
 
 
 def action_table(result: ProtocolResult) -> str:
-    """Per action, each row's success rate and the check its motions fail most often, as a
-    Markdown table (empty when no row has per-action success): ``38 (hand_gap<=hand_gap 62)``
-    reads "38% pass; 62% of this action's motions fail hand_gap <= hand_gap"."""
+    """Per action, the motions judged over all replications (the first row's count: every row
+    judges the same test items) and each row's success rate with the check its motions fail most
+    often, as a Markdown table (empty when no row has per-action success):
+    ``38 (hand_gap<=hand_gap 62)`` reads "38% pass; 62% of this action's motions fail
+    hand_gap <= hand_gap"."""
     rows = [row for row, metrics in result.rows.items() if any(_is_action(k) for k in metrics)]
     actions = list(
         dict.fromkeys(
@@ -75,13 +77,16 @@ def action_table(result: ProtocolResult) -> str:
     if not actions:
         return ""
     lines = [
-        "Success % per action; in brackets the check most of its motions fail, and the % failing it:",
+        "Success % per action (Motions: judged over all replications); in brackets the check"
+        " most of its motions fail, and the % failing it:",
         "",
-        "| Action | " + " | ".join(rows) + " |",
-        "|---|" + "---|" * len(rows),
+        "| Action | Motions | " + " | ".join(rows) + " |",
+        "|---|---|" + "---|" * len(rows),
     ]
     for action in actions:
-        cells = []
+        counts = [result.rows[row].get(f"samples/{action}") for row in rows]
+        count = next((c for c in counts if c is not None), None)
+        cells = ["-" if count is None else f"{sum(count.values):.0f}"]
         for row in rows:
             metrics = result.rows[row]
             rate = metrics.get(f"success/{action}")

@@ -38,12 +38,14 @@ class SuccessRates(NamedTuple):
     failures: torch.Tensor
 
     def as_dict(self) -> dict[str, float]:
-        """``{"success": rate, "success/<action>": rate, "fails/<action>/<check>": rate, ...}``
-        for the actions with samples, every check of theirs (``Check.name``)."""
+        """``{"success": rate, "success/<action>": rate, "samples/<action>": count,
+        "fails/<action>/<check>": rate, ...}`` for the actions with samples, every check of
+        theirs (``Check.name``)."""
         values = {"success": float(self.overall)}
         for action, rate, count in zip(ACTIONS, self.per_action, self.counts, strict=True):
             if int(count):
                 values[f"success/{action}"] = float(rate)
+                values[f"samples/{action}"] = float(count)
         for index, (action, count) in enumerate(zip(ACTIONS, self.counts, strict=True)):
             if int(count):
                 for slot, check in enumerate(CHECKS[action]):

@@ -310,12 +310,12 @@ def test_labelled_batches_give_every_row_with_positions_a_success_column():
     assert table.splitlines()[-1].endswith("| - |")  # no positions
     # per action: each row's rate and the check its motions fail most (the share failing it)
     actions = action_table(result).splitlines()
-    assert actions[2] == "| Action | Ground Truth | Frozen reactor | Swapped |"
-    assert actions[4:] == [
-        "| handshake | 100 | 0 (hand_gap<=hand_gap 100) | 100 |",
-        "| push | 100 | 0 (recoil>=push_recoil 100) | 100 |",
-        "| wave | 100 | 0 (reactor_raise>=raise_height 100) | 100 |",
-        "| walk_meet | 100 | 0 (reactor_travel>=walked 100) | 100 |",
+    assert actions[2] == "| Action | Motions | Ground Truth | Frozen reactor | Swapped |"
+    assert actions[4:] == [  # 2 clips per action, 2 replications
+        "| handshake | 4 | 100 | 0 (hand_gap<=hand_gap 100) | 100 |",
+        "| push | 4 | 100 | 0 (recoil>=push_recoil 100) | 100 |",
+        "| wave | 4 | 100 | 0 (reactor_raise>=raise_height 100) | 100 |",
+        "| walk_meet | 4 | 100 | 0 (reactor_travel>=walked 100) | 100 |",
     ]
     assert frozen["fails/handshake/hand_gap<=hand_gap"].mean == 1.0
     assert frozen["fails/handshake/spacing>=spacing"].mean == 0.0

@@ -71,7 +71,9 @@ def test_rates_equal_the_plain_computation(batch):
     assert values["success"] == pytest.approx(0.5)
     assert values["success/handshake"] == pytest.approx(0.5)
     fails = {f"fails/{a}/{check.name}" for a in CHOSEN for check in CHECKS[a]}
-    assert set(values) == {"success"} | {f"success/{a}" for a in CHOSEN} | fails
+    counts = {f"samples/{a}" for a in CHOSEN}
+    assert set(values) == {"success"} | {f"success/{a}" for a in CHOSEN} | counts | fails
+    assert values["samples/handshake"] == 2.0
 
 
 def test_failure_shares_name_the_checks_the_frozen_reactors_miss(batch):
