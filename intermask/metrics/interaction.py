@@ -371,16 +371,14 @@ def failed_checks(
     be the actor, and a motion that fails both ways reports the reading with fewer failures (the
     first person as the actor on a tie).
     """
-    fewest: tuple[Check, ...] | None = None
+    readings = []
     for index in (0, 1) if actor is None else (actor,):
         signals = measure(joints, action=action, actor=index, thresholds=thresholds)
         failed = tuple(check for check in CHECKS[action] if not check.passes(signals, thresholds))
         if not failed:
             return ()
-        if fewest is None or len(failed) < len(fewest):
-            fewest = failed
-    assert fewest is not None
-    return fewest
+        readings.append(failed)
+    return min(readings, key=len)  # the first of the fewest
 
 
 def passes(

@@ -42,14 +42,13 @@ class SuccessRates(NamedTuple):
         "fails/<action>/<check>": rate, ...}`` for the actions with samples, every check of
         theirs (``Check.name``)."""
         values = {"success": float(self.overall)}
-        for action, rate, count in zip(ACTIONS, self.per_action, self.counts, strict=True):
+        rows = zip(ACTIONS, self.per_action, self.counts, self.failures, strict=True)
+        for action, rate, count, failures in rows:
             if int(count):
                 values[f"success/{action}"] = float(rate)
                 values[f"samples/{action}"] = float(count)
-        for index, (action, count) in enumerate(zip(ACTIONS, self.counts, strict=True)):
-            if int(count):
-                for slot, check in enumerate(CHECKS[action]):
-                    values[f"fails/{action}/{check.name}"] = float(self.failures[index, slot])
+                for check, share in zip(CHECKS[action], failures, strict=False):
+                    values[f"fails/{action}/{check.name}"] = float(share)
         return values
 
 
