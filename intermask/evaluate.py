@@ -19,7 +19,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from intermask.evaluation.protocol import MotionSource, ProtocolConstants, ProtocolRunner
-from intermask.evaluation.report import action_table, markdown_table, write_results
+from intermask.evaluation.report import markdown_table, write_results
 from intermask.evaluation.sources import (
     ARFlowReaction,
     GroundTruth,
@@ -292,10 +292,7 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     result = runner.run(header)
     json_path, markdown_path = write_results(result, output_dir)
     _log_tensorboard(result, output_dir / "tensorboard")
-    print(markdown_table(result))
-    actions = action_table(result)
-    if actions:
-        print(actions)
+    print(markdown_path.read_text())
     print(f"results: {json_path} and {markdown_path}")
     return result.to_dict()
 

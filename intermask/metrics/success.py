@@ -24,6 +24,8 @@ from intermask.metrics.interaction import (
 )
 
 MAX_CHECKS = max(len(checks) for checks in CHECKS.values())
+# (A, MAX_CHECKS): which slots of an action's row are checks of its own
+_CHECK_SLOTS = torch.arange(MAX_CHECKS) < torch.tensor([len(CHECKS[a]) for a in ACTIONS])[:, None]
 
 
 class SuccessRates(NamedTuple):
@@ -98,10 +100,7 @@ class InteractionSuccess(Metric):
         hits = torch.bincount(actions, weights=passed, minlength=len(ACTIONS))
         per_action = torch.where(counts > 0, hits / counts.clamp_min(1), torch.nan)
         bits = (failed[:, None] >> torch.arange(MAX_CHECKS, device=failed.device)) & 1  # (N, K)
-        shape = (len(ACTIONS), MAX_CHECKS)
-        failures = torch.full(shape, torch.nan, dtype=torch.float64, device=failed.device)
-        for index, action in enumerate(ACTIONS):
-            if counts[index]:
-                slots = len(CHECKS[action])
-                failures[index, :slots] = bits[actions == index, :slots].double().mean(0)
+        misses = counts.new_zeros(len(ACTIONS), MAX_CHECKS).index_add_(0, actions, bits.double())
+        measured = _CHECK_SLOTS.to(failed.device) & (counts[:, None] > 0)
+        failures = torch.where(measured, misses / counts.clamp_min(1)[:, None], torch.nan)
         return SuccessRates(passed.mean(), per_action, counts.long(), failures)
