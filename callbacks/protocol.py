@@ -139,12 +139,12 @@ class PeriodicProtocol(Callback):
         finally:
             pl_module.train(was_training)
         rows = result.rows
-        # the per-check failure shares (fails/<action>/<check>) and the per-action counts stay in
-        # the eval's results.json: a training log keeps the rates
+        # the per-check failure shares and signal medians (fails/ and signal/<action>/<check>) and
+        # the per-action counts stay in the eval's results.json: a training log keeps the rates
         values = {
             name: summary.mean
             for name, summary in rows[generated.name].items()
-            if not name.startswith(("fails/", "samples/"))
+            if not name.startswith(("fails/", "samples/", "signal/"))
         }
         truth = rows[ground_truth.name]
         values["gt_top3"] = truth["top3"].mean

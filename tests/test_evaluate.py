@@ -95,6 +95,7 @@ def test_eval_job_writes_the_table(synthetic_interhuman_root, runs, tmp_path, mo
     # and per action, why the motions fail: a line per action in the test split
     assert f"| Action | Motions | Ground Truth | {model_row} |" in table
     assert any(name.startswith("fails/") for name in model)
+    assert any(name.startswith("signal/") for name in model)
     assert (
         json.loads((tmp_path / "results.json").read_text())["rows"].keys() == result["rows"].keys()
     )
@@ -472,8 +473,11 @@ def test_periodic_protocol_logs_quality_during_generator_training(
     assert metrics["protocol/fid"] > 0.0  # an untrained generator is not the GT
     assert 0.0 <= metrics["protocol/success"] <= 1.0 and metrics["protocol/gt_success"] > 0.5
     assert any(name.startswith("protocol/success/") for name in metrics)
-    # the per-check failure shares and the per-action counts stay in the eval's JSON
-    assert not any(name.startswith(("protocol/fails/", "protocol/samples/")) for name in metrics)
+    # the per-check failure shares and signals and the per-action counts stay in the eval's JSON
+    assert not any(
+        name.startswith(("protocol/fails/", "protocol/samples/", "protocol/signal/"))
+        for name in metrics
+    )
     assert 0.0 < metrics["protocol/hours"] < 1.0
 
 

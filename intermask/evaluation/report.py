@@ -66,8 +66,9 @@ def action_table(result: ProtocolResult) -> str:
     """Per action, the motions judged over all replications (the first row's count: every row
     judges the same test items) and each row's success rate with the check its motions fail most
     often, as a Markdown table (empty when no row has per-action success):
-    ``38 (hand_gap<=hand_gap 62)`` reads "38% pass; 62% of this action's motions fail
-    hand_gap <= hand_gap"."""
+    ``38 (hand_gap<=hand_gap 62, median 0.35)`` reads "38% pass; 62% of this action's motions
+    fail hand_gap <= hand_gap, and their median hand gap is 0.35" (the replications' mean of
+    ``signal/<action>/<check>``; left out where the JSON has none)."""
     rows = [row for row, metrics in result.rows.items() if any(_is_action(k) for k in metrics)]
     actions = list(
         dict.fromkeys(
@@ -78,7 +79,7 @@ def action_table(result: ProtocolResult) -> str:
         return ""
     lines = [
         "Success % per action (Motions: judged over all replications); in brackets the check"
-        " most of its motions fail, and the % failing it:",
+        " most of its motions fail, the % failing it and the median of what it measures:",
         "",
         "| Action | Motions | " + " | ".join(rows) + " |",
         "|---|---|" + "---|" * len(rows),
@@ -98,7 +99,9 @@ def action_table(result: ProtocolResult) -> str:
             worst = max(fails, key=fails.get, default=None)
             cell = f"{100 * rate.mean:.0f}"
             if worst is not None and fails[worst] > 0:
-                cell += f" ({worst} {100 * fails[worst]:.0f})"
+                median = metrics.get(f"signal/{action}/{worst}")
+                at = "" if median is None else f", median {median.mean:.2f}"
+                cell += f" ({worst} {100 * fails[worst]:.0f}{at})"
             cells.append(cell)
         lines.append(f"| {action} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

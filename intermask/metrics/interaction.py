@@ -168,6 +168,7 @@ _CHECKS: dict[str, tuple[Check, ...]] = {
 CHECKS: dict[str, tuple[Check, ...]] = {
     action: (*checks, _SPACED) for action, checks in _CHECKS.items()
 }
+MAX_CHECKS = max(len(checks) for checks in CHECKS.values())  # slots of a per-sample row
 
 
 def _horizontal(vectors: torch.Tensor) -> torch.Tensor:
@@ -371,14 +372,22 @@ def failed_checks(
     be the actor, and a motion that fails both ways reports the reading with fewer failures (the
     first person as the actor on a tie).
     """
+    return judge(joints, action=action, actor=actor, thresholds=thresholds)[0]
+
+
+def judge(
+    joints: torch.Tensor, *, action: str, actor: int | None, thresholds: SuccessThresholds
+) -> tuple[tuple[Check, ...], dict[str, float]]:
+    """:func:`failed_checks` (same arguments) and the signals of the reading it reports (with
+    the actor unknown, the person whose reading fails fewer checks acts)."""
     readings = []
     for index in (0, 1) if actor is None else (actor,):
         signals = measure(joints, action=action, actor=index, thresholds=thresholds)
         failed = tuple(check for check in CHECKS[action] if not check.passes(signals, thresholds))
         if not failed:
-            return ()
-        readings.append(failed)
-    return min(readings, key=len)  # the first of the fewest
+            return (), signals
+        readings.append((failed, signals))
+    return min(readings, key=lambda reading: len(reading[0]))  # the first of the fewest
 
 
 def passes(
@@ -424,6 +433,41 @@ def _check_batch(
         )
 
 
+def interaction_judgements(
+    joints: torch.Tensor,
+    lengths: torch.Tensor,
+    action_ids: torch.Tensor,
+    actors: torch.Tensor | None = None,
+    *,
+    thresholds: SuccessThresholds | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per sample, the failed checks of the action it should show and the signal each check
+    reads (:func:`judge`): ``(failures (B,) int64, signals (B, MAX_CHECKS) float64)``. Bit ``i``
+    of a failure word is set when the motion fails ``CHECKS[action][i]`` (0: it succeeds);
+    ``signals[:, i]`` is the value ``CHECKS[action][i]`` compared with its threshold, NaN past
+    the action's checks.
+
+    joints: (B, T, 2, 22, 3) metres, Y up; lengths: (B,) valid frames; action_ids: (B,) indices
+    into ``ACTIONS``; actors: (B,) 1 or 2 (the acting person, in the joints' person order) or 0,
+    or None for all, when unknown (generated motion: either person may act).
+    """
+    _check_batch(joints, lengths, action_ids, actors)
+    thresholds = thresholds or SuccessThresholds()
+    masks, values = [], torch.full((joints.shape[0], MAX_CHECKS), torch.nan, dtype=torch.float64)
+    for index in range(joints.shape[0]):
+        actor = None if actors is None or int(actors[index]) == 0 else int(actors[index]) - 1
+        valid = joints[index, : int(lengths[index])].detach().cpu()
+        action = ACTIONS[int(action_ids[index])]
+        failed, signals = judge(valid, action=action, actor=actor, thresholds=thresholds)
+        masks.append(sum(1 << CHECKS[action].index(check) for check in failed))
+        for slot, check in enumerate(CHECKS[action]):
+            values[index, slot] = signals[check.signal]
+    return (
+        torch.tensor(masks, dtype=torch.int64, device=joints.device),
+        values.to(joints.device),
+    )
+
+
 def interaction_failures(
     joints: torch.Tensor,
     lengths: torch.Tensor,
@@ -432,23 +476,9 @@ def interaction_failures(
     *,
     thresholds: SuccessThresholds | None = None,
 ) -> torch.Tensor:
-    """Per-sample failed checks of the action each motion should show, as bits: bit ``i`` is set
-    when the motion fails ``CHECKS[action][i]`` (:func:`failed_checks`); 0 when it succeeds.
-
-    joints: (B, T, 2, 22, 3) metres, Y up; lengths: (B,) valid frames; action_ids: (B,) indices
-    into ``ACTIONS``; actors: (B,) 1 or 2 (the acting person, in the joints' person order) or 0,
-    or None for all, when unknown (generated motion: either person may act). -> (B,) int64.
-    """
-    _check_batch(joints, lengths, action_ids, actors)
-    thresholds = thresholds or SuccessThresholds()
-    masks = []
-    for index in range(joints.shape[0]):
-        actor = None if actors is None or int(actors[index]) == 0 else int(actors[index]) - 1
-        valid = joints[index, : int(lengths[index])].detach().cpu()
-        action = ACTIONS[int(action_ids[index])]
-        failed = failed_checks(valid, action=action, actor=actor, thresholds=thresholds)
-        masks.append(sum(1 << CHECKS[action].index(check) for check in failed))
-    return torch.tensor(masks, dtype=torch.int64, device=joints.device)
+    """Per-sample failed checks of the action each motion should show, as bits: the first half
+    of :func:`interaction_judgements` (same arguments). -> (B,) int64."""
+    return interaction_judgements(joints, lengths, action_ids, actors, thresholds=thresholds)[0]
 
 
 def interaction_success(

@@ -308,17 +308,21 @@ def test_labelled_batches_give_every_row_with_positions_a_success_column():
     assert "Success % ↑" in table
     assert table.splitlines()[-4].endswith("| 100.0±0.0 |")  # the GT row
     assert table.splitlines()[-1].endswith("| - |")  # no positions
-    # per action: each row's rate and the check its motions fail most (the share failing it)
+    # per action: each row's rate and the check its motions fail most (the share failing it,
+    # the median of its signal: a frozen reactor never recoils nor walks, its hands stay low)
     actions = action_table(result).splitlines()
     assert actions[2] == "| Action | Motions | Ground Truth | Frozen reactor | Swapped |"
     assert actions[4:] == [  # 2 clips per action, 2 replications
-        "| handshake | 4 | 100 | 0 (hand_gap<=hand_gap 100) | 100 |",
-        "| push | 4 | 100 | 0 (recoil>=push_recoil 100) | 100 |",
-        "| wave | 4 | 100 | 0 (reactor_raise>=raise_height 100) | 100 |",
-        "| walk_meet | 4 | 100 | 0 (reactor_travel>=walked 100) | 100 |",
+        "| handshake | 4 | 100 | 0 (hand_gap<=hand_gap 100, median 0.59) | 100 |",
+        "| push | 4 | 100 | 0 (recoil>=push_recoil 100, median 0.00) | 100 |",
+        "| wave | 4 | 100 | 0 (reactor_raise>=raise_height 100, median -0.47) | 100 |",
+        "| walk_meet | 4 | 100 | 0 (reactor_travel>=walked 100, median 0.00) | 100 |",
     ]
     assert frozen["fails/handshake/hand_gap<=hand_gap"].mean == 1.0
     assert frozen["fails/handshake/spacing>=spacing"].mean == 0.0
+    assert frozen["signal/push/recoil>=push_recoil"].mean == 0.0
+    # the ground truth's hands meet: its median gap is under the threshold the frozen one misses
+    assert truth["signal/handshake/hand_gap<=hand_gap"].mean < 0.31  # SuccessThresholds().hand_gap
     unlabelled = {k: v for k, v in split.items() if k != "action"}
     plain = _success_runner(unlabelled, [Truth()]).run({})
     assert "success" not in plain.rows["Ground Truth"]

@@ -15,7 +15,13 @@ from torch.utils.data import DistributedSampler
 from intermask.data.common import single_threaded
 from intermask.data.synthetic import generate_clip
 from intermask.metrics import InteractionSuccess
-from intermask.metrics.interaction import ACTIONS, CHECKS, interaction_success
+from intermask.metrics.interaction import (
+    ACTIONS,
+    CHECKS,
+    SuccessThresholds,
+    interaction_success,
+    judge,
+)
 
 CHOSEN = ("handshake", "wave", "chase", "bow", "push")
 
@@ -72,7 +78,10 @@ def test_rates_equal_the_plain_computation(batch):
     assert values["success/handshake"] == pytest.approx(0.5)
     fails = {f"fails/{a}/{check.name}" for a in CHOSEN for check in CHECKS[a]}
     counts = {f"samples/{a}" for a in CHOSEN}
-    assert set(values) == {"success"} | {f"success/{a}" for a in CHOSEN} | counts | fails
+    signals = {f"signal/{a}/{check.name}" for a in CHOSEN for check in CHECKS[a]}
+    assert set(values) == (
+        {"success"} | {f"success/{a}" for a in CHOSEN} | counts | fails | signals
+    )
     assert values["samples/handshake"] == 2.0
 
 
@@ -100,6 +109,33 @@ def test_failure_shares_name_the_checks_the_frozen_reactors_miss(batch):
             assert row[len(CHECKS[action]) :].isnan().all()  # past the action's checks
         else:
             assert row.isnan().all()  # no samples
+
+
+def test_signal_medians_are_those_of_the_readings_judged(batch):
+    """Per action and check, the median (torch's: the lower middle value) of what the check
+    read on each sample, the reading ``judge`` reports: of two chases, the one whose fleer is
+    frozen sets both medians (it never runs, and the chaser reaches it)."""
+    metric = InteractionSuccess()
+    metric.update(batch["joints"], batch["lengths"], batch["action_ids"], batch["actors"])
+    rates, values = metric.compute(), metric.compute().as_dict()
+    for row, action in enumerate(CHOSEN):
+        readings = [
+            judge(
+                batch["joints"][index, : int(batch["lengths"][index])],
+                action=action,
+                actor=int(batch["actors"][index]) - 1,
+                thresholds=SuccessThresholds(),
+            )[1]
+            for index in (2 * row, 2 * row + 1)
+        ]
+        for slot, check in enumerate(CHECKS[action]):
+            lower = min(float(reading[check.signal]) for reading in readings)
+            assert values[f"signal/{action}/{check.name}"] == pytest.approx(lower, abs=1e-12)
+            assert float(rates.signals[ACTIONS.index(action), slot]) == pytest.approx(lower)
+        assert rates.signals[ACTIONS.index(action), len(CHECKS[action]) :].isnan().all()
+    assert values["signal/chase/chase_run>=run"] == 0.0  # the frozen fleer never runs
+    assert values["signal/chase/min_distance>=escape"] < SuccessThresholds().escape
+    assert rates.signals[ACTIONS.index("hug")].isnan().all()  # no samples
 
 
 def test_duplicated_sample_ids_count_once(batch):
@@ -150,7 +186,15 @@ def _run(rank: int, world: int, data: dict[str, torch.Tensor]) -> torch.Tensor:
             sample_ids=ids,
         )
     rates = metric.compute()
-    return torch.cat((rates.overall[None], rates.per_action, rates.counts.double()))
+    return torch.cat(
+        (
+            rates.overall[None],
+            rates.per_action,
+            rates.counts.double(),
+            rates.failures.flatten(),
+            rates.signals.flatten(),
+        )
+    )
 
 
 def _worker(rank: int, world: int, port: int, out_dir: str) -> None:
