@@ -40,7 +40,7 @@ def _perplexity(indices: torch.Tensor, codebook_size: int) -> torch.Tensor:
     return torch.exp(-(probabilities * torch.log(probabilities.clamp_min(1e-10))).sum())
 
 
-RESETS = ("restart", "reference")  # dead-code rules of EMAQuantizer
+RESETS = ("restart", "reference", "farthest")  # dead-code rules of EMAQuantizer
 
 
 class EMAQuantizer(nn.Module):
@@ -61,6 +61,11 @@ class EMAQuantizer(nn.Module):
             reference code's rule: codes are EMA sums over raw counts, and a code whose count
             is below ``reset_threshold`` is overwritten by a random encoder output at every
             step while its EMA statistics are left to recover (docs/fidelity.md).
+            ``"farthest"``: as ``"restart"``, but a dead code restarts from the encoder output
+            that its codebook serves worst (the largest distance to the nearest code in the
+            global batch), the next dead code from the next worst, and so on: a rare pose that
+            shares a code with a common one (a kick with a raised knee) gets a code of its own
+            instead of pulling a shared one toward it (docs/learning.md, thirtieth pass).
     """
 
     def __init__(
@@ -182,6 +187,20 @@ class EMAQuantizer(nn.Module):
         return rows
 
     @torch.no_grad()
+    def _farthest_rows(
+        self, flat: torch.Tensor, errors: torch.Tensor, dead: torch.Tensor
+    ) -> torch.Tensor:
+        """(K, D): the dead codes, in index order, get the global batch's encoder outputs in
+        order of decreasing quantization error (``errors`` (N,), -inf for rows that count for
+        nothing), cycling when there are more dead codes than such rows; live codes' rows are
+        unused. The same rows on every rank: the gathered batch is sorted the same everywhere."""
+        flat, errors = gather_rows(flat), gather_rows(errors)
+        order = torch.argsort(errors, descending=True, stable=True)
+        order = order[: max(int(torch.isfinite(errors).sum()), 1)]  # the -inf rows sort last
+        slots = torch.cumsum(dead.long(), 0) - 1  # the rank of each dead code among the dead
+        return flat[order[slots.clamp_min(0) % order.numel()]]
+
+    @torch.no_grad()
     def _initialise(self, flat: torch.Tensor, generator: torch.Generator | None) -> None:
         rows = self._random_rows(flat.float(), generator)
         self.codebook.copy_(rows)
@@ -204,6 +223,10 @@ class EMAQuantizer(nn.Module):
             torch.bincount(indices, weights=valid.float(), minlength=self.codebook_size).float()
         )
         sums = all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
+        # farthest: each row's quantization error under the codebook it was assigned with
+        errors = (
+            (flat - self.codebook[indices]).pow(2).sum(-1) if self.reset == "farthest" else None
+        )
         self.ema_count.mul_(self.decay).add_(counts, alpha=1 - self.decay)
         self.ema_sum.mul_(self.decay).add_(sums, alpha=1 - self.decay)
         if self.reset == "reference":
@@ -213,7 +236,11 @@ class EMAQuantizer(nn.Module):
         self.codebook.copy_(self.ema_sum / smoothed[:, None])
         dead = self.ema_count < self.reset_threshold
         if dead.any():
-            replacement = self._random_rows(flat, generator)
+            replacement = (
+                self._farthest_rows(flat, torch.where(valid, errors, -torch.inf), dead)
+                if errors is not None
+                else self._random_rows(flat, generator)
+            )
             self.codebook[dead] = replacement[dead]
             self.ema_sum[dead] = replacement[dead]
             self.ema_count[dead] = 1.0

@@ -1,5 +1,8 @@
+import functools
+
 import pytest
 import torch
+from gloo import run_on_processes
 
 from intermask.vq.quantizers import EMAQuantizer, ResidualQuantizer
 
@@ -85,6 +88,69 @@ def test_the_reference_reset_keeps_raw_statistics_and_overwrites_unused_codes():
     torch.testing.assert_close(restart.ema_count[1:], torch.ones(2))
 
 
+def test_the_farthest_reset_gives_dead_codes_the_worst_served_vectors_in_order():
+    """reset="farthest": the dead codes (1 and 2, in index order) restart from the batch vectors
+    farthest from the code they were assigned, the worst first; code 0 is an EMA mean as with
+    "restart", and the counts go back to 1."""
+    quantizer = EMAQuantizer(codebook_size=3, dim=2, decay=0.9, reset="farthest").train()
+    x = _one_used_code_of_three(quantizer)
+    x[:, :, 0, 1] = torch.tensor([0.0, 3.0])  # the worst served (9 from code 0)
+    x[:, :, 0, 3] = torch.tensor([2.0, 0.0])  # the next (4)
+    out = quantizer(x)
+    assert out.dead_codes == 2
+    torch.testing.assert_close(quantizer.codebook[1:], torch.tensor([[0.0, 3.0], [2.0, 0.0]]))
+    torch.testing.assert_close(quantizer.ema_sum[1:], quantizer.codebook[1:])
+    torch.testing.assert_close(quantizer.ema_count, torch.tensor([1.3, 1.0, 1.0]))
+    # the same step under "restart" draws the replacements at random from the batch
+    restart = EMAQuantizer(codebook_size=3, dim=2, decay=0.9).train()
+    y = _one_used_code_of_three(restart)
+    y[:, :, 0, 1], y[:, :, 0, 3] = torch.tensor([0.0, 3.0]), torch.tensor([2.0, 0.0])
+    torch.testing.assert_close(restart(y).quantized, out.quantized)  # same codes used this step
+    torch.testing.assert_close(restart.codebook[0], quantizer.codebook[0])
+
+
+def test_the_farthest_reset_cycles_when_codes_outnumber_vectors_and_skips_non_finite_rows():
+    quantizer = EMAQuantizer(codebook_size=4, dim=1, decay=0.5, reset="farthest").train()
+    quantizer.codebook.copy_(torch.tensor([[0.0], [50.0], [60.0], [70.0]]))
+    quantizer.ema_sum.copy_(quantizer.codebook)
+    quantizer.ema_count.fill_(1.0)
+    quantizer.initialized.fill_(True)
+    x = torch.tensor([1.0, 3.0, float("nan")]).reshape(1, 1, 1, 3)
+    out = quantizer(x)
+    # codes 1-3 die (count 0.5): 3.0 (error 9), then 1.0 (1), then 3.0 again; the NaN row never
+    assert out.dead_codes == 3
+    torch.testing.assert_close(quantizer.codebook[1:, 0], torch.tensor([3.0, 1.0, 3.0]))
+
+
+def _farthest_step(x: torch.Tensor) -> EMAQuantizer:
+    """A farthest-reset quantizer after one step on ``x``: 8 codes, all but code 0 far away."""
+    quantizer = EMAQuantizer(codebook_size=8, dim=2, decay=0.9, reset="farthest").train()
+    codebook = torch.cat((torch.zeros(1, 2), torch.full((7, 2), 100.0)))
+    quantizer.codebook.copy_(codebook)
+    quantizer.ema_sum.copy_(codebook)
+    quantizer.ema_count.fill_(1.0)
+    quantizer.initialized.fill_(True)
+    quantizer(x)
+    return quantizer
+
+
+def _farthest_worker(rank: int, world: int, *, out_dir: str) -> None:
+    x = torch.randn(2, 2, 2, 3, generator=torch.Generator().manual_seed(0))
+    quantizer = _farthest_step(x[rank : rank + 1])  # each rank holds half the global batch
+    torch.save(quantizer.codebook, f"{out_dir}/rank{rank}.pt")
+
+
+def test_the_farthest_reset_on_two_ranks_equals_one_process(tmp_path):
+    run_on_processes(functools.partial(_farthest_worker, out_dir=str(tmp_path)), world=2)
+    x = torch.randn(2, 2, 2, 3, generator=torch.Generator().manual_seed(0))
+    one = _farthest_step(x).codebook
+    vectors = x.permute(0, 2, 3, 1).reshape(-1, 2)
+    errors = vectors.pow(2).sum(-1)  # every vector was assigned code 0, at the origin
+    torch.testing.assert_close(one[1:], vectors[errors.argsort(descending=True)[:7]])
+    for rank in range(2):
+        torch.testing.assert_close(torch.load(tmp_path / f"rank{rank}.pt"), one)
+
+
 def test_eval_mode_picks_the_nearest_code_and_leaves_the_codebook_alone():
     quantizer = EMAQuantizer(codebook_size=2, dim=1, stochastic_temperature=0.5).eval()
     quantizer.codebook.copy_(torch.tensor([[0.0], [1.0]]))
@@ -139,7 +205,10 @@ def test_quantization_dropout_keeps_a_prefix_of_layers():
             dict(stochastic_temperature=0.0),
             "stochastic_temperature must be positive or None, got 0.0",
         ),
-        (dict(reset="x"), r"reset must be one of \('restart', 'reference'\), got 'x'"),
+        (
+            dict(reset="x"),
+            r"reset must be one of \('restart', 'reference', 'farthest'\), got 'x'",
+        ),
     ],
 )
 def test_invalid_options_are_rejected(kwargs, message):
