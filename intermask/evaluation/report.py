@@ -67,8 +67,8 @@ def action_table(result: ProtocolResult) -> str:
     judges the same test items) and each row's success rate with the check its motions fail most
     often, as a Markdown table (empty when no row has per-action success):
     ``38 (hand_gap<=hand_gap 62, median 0.35)`` reads "38% pass; 62% of this action's motions
-    fail hand_gap <= hand_gap, and their median hand gap is 0.35" (the replications' mean of
-    ``signal/<action>/<check>``; left out where the JSON has none)."""
+    fail hand_gap <= hand_gap, and the median hand gap over all of its motions is 0.35 m" (the
+    replications' mean of ``signal/<action>/<check>``; left out where the JSON has none)."""
     rows = [row for row, metrics in result.rows.items() if any(_is_action(k) for k in metrics)]
     actions = list(
         dict.fromkeys(

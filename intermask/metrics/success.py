@@ -33,9 +33,10 @@ class SuccessRates(NamedTuple):
     """overall: () success rate; per_action: (A,) rates in ``ACTIONS`` order, NaN for an action
     without samples; counts: (A,) samples per action; failures: (A, MAX_CHECKS) share of each
     action's samples that fail ``CHECKS[action][i]``, NaN past the action's checks or without
-    samples (a sample can fail several checks); signals: (A, MAX_CHECKS) median over the
+    samples (a sample can fail several checks); signals: (A, MAX_CHECKS) median over all the
     action's samples of the value ``CHECKS[action][i]`` reads (how far from its threshold the
-    action's motions are: a kick of 0.16 m where 0.26 m are needed), NaN where ``failures`` is."""
+    action's motions are: a kick of 0.16 m where 0.26 m are needed; for an even count the lower
+    of the two middle values, as ``torch.nanmedian``), NaN where ``failures`` is."""
 
     overall: torch.Tensor
     per_action: torch.Tensor

@@ -63,9 +63,10 @@ class EMAQuantizer(nn.Module):
             step while its EMA statistics are left to recover (docs/fidelity.md).
             ``"farthest"``: as ``"restart"``, but a dead code restarts from the encoder output
             that its codebook serves worst (the largest distance to the nearest code in the
-            global batch), the next dead code from the next worst, and so on: a rare pose that
-            shares a code with a common one (a kick with a raised knee) gets a code of its own
-            instead of pulling a shared one toward it (docs/learning.md, thirtieth pass).
+            global batch), the next dead code from the next worst, and so on: the latents a
+            rare pose leaves far from every code get codes of their own instead of random
+            ones. On the demo it lowered the tokenizer's and its generators' FID
+            (docs/learning.md, thirtieth pass).
     """
 
     def __init__(
