@@ -468,19 +468,6 @@ def interaction_judgements(
     )
 
 
-def interaction_failures(
-    joints: torch.Tensor,
-    lengths: torch.Tensor,
-    action_ids: torch.Tensor,
-    actors: torch.Tensor | None = None,
-    *,
-    thresholds: SuccessThresholds | None = None,
-) -> torch.Tensor:
-    """Per-sample failed checks of the action each motion should show, as bits: the first half
-    of :func:`interaction_judgements` (same arguments). -> (B,) int64."""
-    return interaction_judgements(joints, lengths, action_ids, actors, thresholds=thresholds)[0]
-
-
 def interaction_success(
     joints: torch.Tensor,
     lengths: torch.Tensor,
@@ -489,7 +476,7 @@ def interaction_success(
     *,
     thresholds: SuccessThresholds | None = None,
 ) -> torch.Tensor:
-    """Per-sample success of the action each motion should show: :func:`interaction_failures`
-    (same arguments) without a failed check. -> (B,) bool."""
-    failures = interaction_failures(joints, lengths, action_ids, actors, thresholds=thresholds)
+    """Per-sample success of the action each motion should show: no failed check in
+    :func:`interaction_judgements` (same arguments). -> (B,) bool."""
+    failures, _ = interaction_judgements(joints, lengths, action_ids, actors, thresholds=thresholds)
     return failures == 0

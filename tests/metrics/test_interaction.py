@@ -18,7 +18,7 @@ from intermask.metrics.interaction import (
     Check,
     SuccessThresholds,
     failed_checks,
-    interaction_failures,
+    interaction_judgements,
     interaction_success,
     measure,
     passes,
@@ -206,7 +206,7 @@ def test_failures_are_bits_of_the_actions_checks(clips):
     lengths = torch.tensor([len(handshake), len(handshake), len(high_five)])
     action_ids = torch.full((3,), ACTIONS.index("handshake"))
     actors = torch.tensor([actor + 1, actor + 1, high_five_actor + 1])
-    failures = interaction_failures(joints, lengths, action_ids, actors, thresholds=THRESHOLDS)
+    failures, _ = interaction_judgements(joints, lengths, action_ids, actors, thresholds=THRESHOLDS)
     # handshake checks: hand_gap (bit 0), arrival_lead (1), contact_height (2), spacing (3)
     assert _names(CHECKS["handshake"]) == [
         "hand_gap<=hand_gap",

@@ -148,7 +148,7 @@ def test_the_farthest_reset_on_two_ranks_equals_one_process(tmp_path):
     errors = vectors.pow(2).sum(-1)  # every vector was assigned code 0, at the origin
     torch.testing.assert_close(one[1:], vectors[errors.argsort(descending=True)[:7]])
     for rank in range(2):
-        torch.testing.assert_close(torch.load(tmp_path / f"rank{rank}.pt"), one)
+        torch.testing.assert_close(torch.load(tmp_path / f"rank{rank}.pt", weights_only=True), one)
 
 
 def test_eval_mode_picks_the_nearest_code_and_leaves_the_codebook_alone():
