@@ -6,11 +6,15 @@ running ViT-L/14 every step. Layout under ``cache_dir``::
     <identity hash>/identity.txt        the full encoder identity, for people
     <identity hash>/<k[:2]>/<k>.pt      one caption: {"format", "caption", "tokens", "eot_index"}
 
-``k`` = sha256(identity, caption). The identity names the architecture, the weight source and a
-hash of the weights, so a random tower's entries can never be served to a real CLIP. Tokens are
-stored as fp16 (L, D); every result, fresh or cached, goes through the same fp16 rounding, so a
-hit returns exactly what the miss returned. Files are written to a temporary name and renamed,
-so DDP ranks writing the same entry at once never leave a torn file.
+``k`` = sha256(identity, caption). The identity hash covers the cache format and the encoder's
+identity, which names the architecture, the weight source and a hash of the weights, so a random
+tower's entries can never be served to a real CLIP. Tokens are stored as fp16 (L, D); every
+result, fresh or cached, goes through the same fp16 rounding, so a hit returns exactly what the
+miss returned, and the encoder computes each caption on its own, so a miss returns the same bits
+whichever captions were missed with it: what a job reads does not depend on what earlier jobs
+wrote. Format v1 entries (batch-dependent in their last bits on AVX2 kernels) live under other
+hashes and are not read. Files are written to a temporary name and renamed, so DDP ranks writing
+the same entry at once never leave a torn file.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from intermask.text.clip_encoder import FrozenCLIPTextEncoder, TextFeatures, pad
 
 log = logging.getLogger(__name__)
 
-CACHE_FORMAT = "intermask-text-cache-v1"
+CACHE_FORMAT = "intermask-text-cache-v2"  # v2: features of each caption alone
 STORAGE_DTYPE = torch.float16
 
 
@@ -49,7 +53,8 @@ class TextFeatureCache:
         cache_dir: folder for the fp16 files; None keeps the cache in memory only.
         memory_items: captions kept in the in-memory LRU layer (0 disables it). One ViT-L/14
             entry is 77 x 768 fp16 = 118 KB.
-        batch_size: misses are encoded in chunks of this many captions.
+        batch_size: misses go to the encoder in chunks of this many captions (it bounds the
+            features held at once; the features do not depend on it).
     """
 
     def __init__(
@@ -67,7 +72,7 @@ class TextFeatureCache:
         self.encoder = encoder
         self.memory_items, self.batch_size = memory_items, batch_size
         self.identity = encoder.identity
-        self.identity_key = _sha256(self.identity)[:16]
+        self.identity_key = _sha256(CACHE_FORMAT, self.identity)[:16]
         self.directory = None if cache_dir is None else Path(cache_dir) / self.identity_key
         if self.directory is not None:
             self.directory.mkdir(parents=True, exist_ok=True)

@@ -149,17 +149,25 @@ class FrozenCLIPTextEncoder(nn.Module):
     def encode(self, captions: Sequence[str]) -> TextFeatures:
         """B captions -> TextFeatures: tokens (B, L, D), eot_index (B,), padding_mask (B, L).
 
-        The causal attention mask of CLIP means a position only sees the positions before it,
-        so every row (padding included) depends on its own caption only, never on the batch.
+        A row's features are a function of its caption alone, to the last bit: each caption
+        goes through the tower on its own. In a batch, CLIP's causal mask keeps the captions
+        apart, but the matmuls do not round a row the same way for every batch size: on AVX2
+        kernels every feature of a caption encoded among 300 differs from the same caption
+        encoded alone (by up to 3e-6, and in fp16 as well). The features feed a cache that jobs
+        share (:class:`intermask.text.cache.TextFeatureCache`), so batch-dependent features
+        made one job's numbers depend on which captions an earlier job had encoded together.
         """
         ids = self.tokenize(captions).to(self.device)  # (B, L)
-        cast_dtype = self.transformer.get_cast_dtype()
-        x = self.token_embedding(ids).to(cast_dtype) + self.positional_embedding.to(cast_dtype)
-        x = self.transformer(x, attn_mask=self.attn_mask)  # (B, L, D)
-        x = self.ln_final(x)
+        x = torch.cat([self._tower(row[None]) for row in ids])  # (B, L, D)
         # the end-of-text token has the largest id of CLIP's vocabulary (open_clip pools the same way)
         eot_index = ids.argmax(dim=-1)  # (B,)
         return TextFeatures(x, eot_index, padding_mask_from_eot(eot_index, ids.shape[1]))
+
+    def _tower(self, ids: torch.Tensor) -> torch.Tensor:
+        """(1, L) token ids -> (1, L, D) features after the final LayerNorm."""
+        cast_dtype = self.transformer.get_cast_dtype()
+        x = self.token_embedding(ids).to(cast_dtype) + self.positional_embedding.to(cast_dtype)
+        return self.ln_final(self.transformer(x, attn_mask=self.attn_mask))
 
     def forward(self, captions: Sequence[str]) -> TextFeatures:
         return self.encode(captions)

@@ -143,3 +143,27 @@ def test_invalid_arguments(spy):
         cache.get_or_encode("a person waves")
     with pytest.raises(ValueError, match="captions is empty"):
         cache.get_or_encode([])
+
+
+def test_entries_of_the_batch_dependent_format_are_not_read(tmp_path, spy):
+    """v1 entries (features computed in batches) sit under the identity's old hash: a v2 cache
+    neither reads nor overwrites them."""
+    import hashlib
+
+    from intermask.text.cache import CACHE_FORMAT
+
+    assert CACHE_FORMAT == "intermask-text-cache-v2"
+    old_key = hashlib.sha256(spy.identity.encode() + b"\0").hexdigest()[:16]
+    caption = CAPTIONS[0]
+    key = hashlib.sha256(spy.identity.encode() + b"\0" + caption.encode() + b"\0").hexdigest()
+    old = tmp_path / old_key / key[:2] / f"{key}.pt"
+    old.parent.mkdir(parents=True)
+    stale = torch.zeros(77, 64, dtype=torch.float16)
+    payload = {"format": "intermask-text-cache-v1", "caption": caption, "tokens": stale}
+    torch.save(payload | {"eot_index": 4}, old)
+    cache = TextFeatureCache(encoder=spy, cache_dir=tmp_path)
+    features = cache.get_or_encode([caption])
+    assert spy.calls == [[caption]] and cache.disk_hits == 0
+    assert cache.directory.name != old_key and cache.path(caption).is_file()
+    assert not torch.equal(features.tokens[0].half(), stale)
+    assert torch.equal(torch.load(old, weights_only=True)["tokens"], stale)  # left as it was
