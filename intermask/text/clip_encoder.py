@@ -153,7 +153,7 @@ class FrozenCLIPTextEncoder(nn.Module):
         goes through the tower on its own. In a batch, CLIP's causal mask keeps the captions
         apart, but the matmuls do not round a row the same way for every batch size: on AVX2
         kernels every feature of a caption encoded among 300 differs from the same caption
-        encoded alone (by up to 3e-6, and in fp16 as well). The features feed a cache that jobs
+        encoded alone (by up to 2.6e-6, and in fp16 as well). The features feed a cache that jobs
         share (:class:`intermask.text.cache.TextFeatureCache`), so batch-dependent features
         made one job's numbers depend on which captions an earlier job had encoded together.
         """

@@ -148,14 +148,12 @@ def test_invalid_arguments(spy):
 def test_entries_of_the_batch_dependent_format_are_not_read(tmp_path, spy):
     """v1 entries (features computed in batches) sit under the identity's old hash: a v2 cache
     neither reads nor overwrites them."""
-    import hashlib
-
-    from intermask.text.cache import CACHE_FORMAT
+    from intermask.text.cache import CACHE_FORMAT, _sha256
 
     assert CACHE_FORMAT == "intermask-text-cache-v2"
-    old_key = hashlib.sha256(spy.identity.encode() + b"\0").hexdigest()[:16]
+    old_key = _sha256(spy.identity)[:16]  # v1: the identity's hash alone
     caption = CAPTIONS[0]
-    key = hashlib.sha256(spy.identity.encode() + b"\0" + caption.encode() + b"\0").hexdigest()
+    key = _sha256(spy.identity, caption)  # the entry's own key did not change
     old = tmp_path / old_key / key[:2] / f"{key}.pt"
     old.parent.mkdir(parents=True)
     stale = torch.zeros(77, 64, dtype=torch.float16)
