@@ -224,24 +224,23 @@ class EMAQuantizer(nn.Module):
             torch.bincount(indices, weights=valid.float(), minlength=self.codebook_size).float()
         )
         sums = all_reduce_sum(torch.zeros_like(self.ema_sum).index_add_(0, indices, flat))
-        # farthest: each row's quantization error under the codebook it was assigned with
-        errors = (
-            (flat - self.codebook[indices]).pow(2).sum(-1) if self.reset == "farthest" else None
-        )
         self.ema_count.mul_(self.decay).add_(counts, alpha=1 - self.decay)
         self.ema_sum.mul_(self.decay).add_(sums, alpha=1 - self.decay)
         if self.reset == "reference":
             return self._reference_update(flat, generator)
+        dead = self.ema_count < self.reset_threshold
+        revive = bool(dead.any())
+        if revive and self.reset == "farthest":
+            # each row's quantization error under the codebook it was assigned with (not yet
+            # updated), computed only on the steps where a code dies
+            errors = (flat - self.codebook[indices]).pow(2).sum(-1)
+            replacement = self._farthest_rows(flat, torch.where(valid, errors, -torch.inf), dead)
+        elif revive:
+            replacement = self._random_rows(flat, generator)
         total = self.ema_count.sum()
         smoothed = (self.ema_count + self.eps) / (total + self.codebook_size * self.eps) * total
         self.codebook.copy_(self.ema_sum / smoothed[:, None])
-        dead = self.ema_count < self.reset_threshold
-        if dead.any():
-            replacement = (
-                self._farthest_rows(flat, torch.where(valid, errors, -torch.inf), dead)
-                if errors is not None
-                else self._random_rows(flat, generator)
-            )
+        if revive:
             self.codebook[dead] = replacement[dead]
             self.ema_sum[dead] = replacement[dead]
             self.ema_count[dead] = 1.0
