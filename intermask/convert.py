@@ -30,6 +30,7 @@ from intermask.config_files import config_dir
 from intermask.interm.reference import convert_reference_generator
 from intermask.utils.checkpoint_files import atomic_torch_save, read_checkpoint_file
 from intermask.utils.fingerprint import weights_digest
+from intermask.utils.staging import staged_outputs
 from intermask.utils.state_conversion import Conversion
 from intermask.vq.reference import convert_reference_vq, has_graph_ends
 
@@ -94,14 +95,14 @@ def _checked(conversion: Conversion, checkpoint: Path, kind: str) -> Conversion:
     return conversion
 
 
-def _write_run(folder: Path, config: Any, payload: dict[str, Any]) -> Path:
-    """A run folder that does not exist yet (the caller checked): config.yaml and last.ckpt."""
+def _write_run(staged: Path, folder: Path, config: Any, payload: dict[str, Any]) -> None:
+    """The run folder ``folder`` written at ``staged`` (moved into place by the caller):
+    config.yaml and last.ckpt, the config naming ``folder``, where the run will live."""
     with open_dict(config):
         config.paths.output_dir = str(folder)  # what a training run records as its folder
-    (folder / "checkpoints").mkdir(parents=True)
-    OmegaConf.save(config, folder / "config.yaml", resolve=True)
-    atomic_torch_save(payload, folder / "checkpoints" / "last.ckpt")
-    return folder
+    (staged / "checkpoints").mkdir(parents=True)
+    OmegaConf.save(config, staged / "config.yaml", resolve=True)
+    atomic_torch_save(payload, staged / "checkpoints" / "last.ckpt")
 
 
 STATISTICS = ("view.mean", "view.std", "view.has_statistics")
@@ -189,11 +190,9 @@ def convert_reference(
                 },
             },
         )
-    for folder in (out / "vq", out / "gen"):
-        if folder.exists():
-            raise FileExistsError(
-                f"{folder} exists: choose another --out (nothing was overwritten)"
-            )
-    vq_run = _write_run(out / "vq", vq_config, vq_payload)
-    gen_run = None if gen is None else _write_run(out / "gen", *gen)
-    return Converted(vq_run, gen_run, reports)
+    names = ("vq",) if gen is None else ("vq", "gen")
+    with staged_outputs(out, names) as staged:  # both runs appear whole, or nothing does
+        _write_run(staged / "vq", out.absolute() / "vq", vq_config, vq_payload)
+        if gen is not None:
+            _write_run(staged / "gen", out.absolute() / "gen", *gen)
+    return Converted(out / "vq", None if gen is None else out / "gen", reports)

@@ -23,9 +23,6 @@ from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
 CONFIG_DIR = str(config_dir())
-# ${div:a,b} in configs, e.g. the generator's warm-up of a quarter epoch as a share of all steps
-if not OmegaConf.has_resolver("div"):
-    OmegaConf.register_new_resolver("div", lambda numerator, denominator: numerator / denominator)
 
 
 def instantiate_all(group: DictConfig | None) -> list[Any]:
