@@ -180,6 +180,7 @@ def _convert_reference(args: argparse.Namespace) -> int:
         out=args.out,
         dataset=args.dataset,
         statistics=None if args.mean is None else (Path(args.mean), Path(args.std)),
+        ignore_options=args.ignore_option or (),
     )
     for name, report in done.reports.items():
         print(f"{name}: {report}")
@@ -374,6 +375,13 @@ def build_parser() -> argparse.ArgumentParser:
     convert.add_argument("--dataset", choices=("interhuman", "interx"), help="default: opt.txt's")
     convert.add_argument("--mean", help="the release's global_mean.npy (InterHuman)")
     convert.add_argument("--std", help="the release's global_std.npy (InterHuman)")
+    convert.add_argument(
+        "--ignore-option",
+        action="append",
+        metavar="NAME",
+        help="an opt.txt option the authors' code does not have and that does not change the "
+        "network (repeat); any other unknown option is refused",
+    )
     convert.set_defaults(run=_convert_reference)
     return parser
 

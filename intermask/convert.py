@@ -16,6 +16,7 @@ a conversion that leaves any of our weights without a value is refused.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,9 +26,11 @@ import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from omegaconf import OmegaConf, open_dict
+from torch import nn
 
 from intermask.config_files import config_dir
 from intermask.interm.reference import convert_reference_generator
+from intermask.release_options import generator_overrides, vq_overrides
 from intermask.utils.checkpoint_files import atomic_torch_save, read_checkpoint_file
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.staging import staged_outputs
@@ -108,6 +111,80 @@ def _write_run(staged: Path, folder: Path, config: Any, payload: dict[str, Any])
 STATISTICS = ("view.mean", "view.std", "view.has_statistics")
 
 
+def _configured(job: str, overrides: list[str], options: dict[str, Any]) -> Any:
+    """A composed job config with the release's opt.txt options applied."""
+    config = _compose(job, overrides)
+    with open_dict(config):
+        for key, value in options.items():
+            OmegaConf.update(config, key, value, merge=False)
+    return config
+
+
+def _convert_vq(
+    vq: Path,
+    dataset: str,
+    options: dict[str, str],
+    statistics: tuple[Path, Path] | None,
+    ignore: Collection[str],
+) -> tuple[Any, nn.Module, str]:
+    """(config, network with the release's weights, report) of the release's tokenizer."""
+    mapped = vq_overrides(options, source=f"{vq.parent.parent / 'opt.txt'}", ignore=ignore)
+    config = _configured("train_vq", [f"data={dataset}", f"experiment=vq_{dataset}"], mapped)
+    reference = _state(vq, VQ_KEYS, "VQ-VAE")
+    with open_dict(config):
+        config.model.net.quantizer.stochastic_temperature = 0.5  # fidelity rows 6-7
+        config.model.net.quantizer.reset = "reference"
+        if has_graph_ends(reference):  # the InterHuman release (fidelity, graph ends)
+            config.model.net.encoder.ends = "graph_first_frame"
+    net = instantiate(config.model.net)
+    conversion = convert_reference_vq(reference, net.state_dict())
+    if any(key in STATISTICS for key in conversion.missing):
+        if statistics is None:
+            raise ValueError(
+                f"{vq}: this tokenizer normalizes its features: pass the release's statistics "
+                "(--mean global_mean.npy --std global_std.npy)"
+            )
+        mean, std = (torch.from_numpy(np.load(path)).float() for path in statistics)
+        net.view.set_statistics(mean, std)
+        conversion = conversion._replace(
+            missing=[key for key in conversion.missing if key not in STATISTICS]
+        )
+    _checked(conversion, vq, "VQ-VAE")
+    net.load_state_dict({**net.state_dict(), **conversion.state})
+    return config, net, conversion.report()
+
+
+def _convert_generator(
+    generator: Path,
+    dataset: str,
+    vq_net: nn.Module,
+    code_dim: int,
+    vq_checkpoint: Path,
+    ignore: Collection[str],
+) -> tuple[Any, nn.Module, str]:
+    """(config, network with the release's weights, report) of the release's transformer."""
+    options = read_options(generator)
+    mapped = generator_overrides(
+        options, source=f"{generator.parent.parent / 'opt.txt'}", ignore=ignore
+    )
+    config = _configured(
+        "train_gen",
+        [f"data={dataset}", f"experiment=gen_{dataset}", f"vq_ckpt={vq_checkpoint}"],
+        mapped,
+    )
+    with open_dict(config):
+        config.model.net.update(REFERENCE_GENERATOR)
+        # the release embeds tokens at its tokenizer's code width (its MaskTransformer's code_dim)
+        config.model.net.token_embed_dim = code_dim
+    net = instantiate(config.model.net)(codebook_size=vq_net.quantizer.codebook_size)
+    conversion = convert_reference_generator(
+        _state(generator, GENERATOR_KEYS, "generator"), net.state_dict()
+    )
+    _checked(conversion, generator, "generator")
+    net.load_state_dict(conversion.state)
+    return config, net, conversion.report()
+
+
 def convert_reference(
     *,
     vq: Path,
@@ -115,11 +192,16 @@ def convert_reference(
     out: Path,
     dataset: str | None = None,
     statistics: tuple[Path, Path] | None = None,
+    ignore_options: Collection[str] = (),
 ) -> Converted:
     """Convert the release's tokenizer (and generator) into run folders under ``out``.
 
+    Both are converted in full before anything is written; the run folders then appear whole,
+    or not at all (a failure leaves no output behind).
     ``statistics``: the release's ``global_mean.npy`` and ``global_std.npy`` (InterHuman: the
     reference normalizes the 262 features with them; Inter-X has none).
+    ``ignore_options``: opt.txt options the authors' code does not have that the user vouches
+    do not change the network (anything else unknown is refused).
     """
     vq, out = Path(vq), Path(out)
     vq_options = read_options(vq)
@@ -128,71 +210,41 @@ def convert_reference(
         raise ValueError(
             f"{vq}: dataset {dataset!r} (opt.txt dataset_name or --dataset) is not one of {DATASETS}"
         )
-    reports = {}
-    vq_config = _compose("train_vq", [f"data={dataset}", f"experiment=vq_{dataset}"])
-    reference_vq = _state(vq, VQ_KEYS, "VQ-VAE")
-    with open_dict(vq_config):
-        vq_config.model.net.quantizer.stochastic_temperature = 0.5  # fidelity rows 6-7
-        vq_config.model.net.quantizer.reset = "reference"
-        if has_graph_ends(reference_vq):  # the InterHuman release (fidelity, graph ends)
-            vq_config.model.net.encoder.ends = "graph_first_frame"
-    vq_net = instantiate(vq_config.model.net)
-    conversion = convert_reference_vq(reference_vq, vq_net.state_dict())
-    needs_statistics = [key for key in conversion.missing if key in STATISTICS]
-    if needs_statistics:
-        if statistics is None:
-            raise ValueError(
-                f"{vq}: this tokenizer normalizes its features: pass the release's statistics "
-                "(--mean global_mean.npy --std global_std.npy)"
-            )
-        mean, std = (torch.from_numpy(np.load(path)).float() for path in statistics)
-        vq_net.view.set_statistics(mean, std)
-        conversion = conversion._replace(
-            missing=[key for key in conversion.missing if key not in STATISTICS]
+    vq_config, vq_net, vq_report = _convert_vq(vq, dataset, vq_options, statistics, ignore_options)
+    reports = {"vq": vq_report}
+    runs = {
+        "vq": (
+            vq_config,
+            {
+                "state_dict": {f"net.{k}": v for k, v in vq_net.state_dict().items()},
+                "hyper_parameters": {"converted_from": str(vq), "reference_options": vq_options},
+            },
         )
-    _checked(conversion, vq, "VQ-VAE")
-    reports["vq"] = conversion.report()
-    vq_net.load_state_dict({**vq_net.state_dict(), **conversion.state})
-    vq_payload = {
-        "state_dict": {f"net.{k}": v for k, v in vq_net.state_dict().items()},
-        "hyper_parameters": {"converted_from": str(vq), "reference_options": vq_options},
     }
-    gen = None
-    if generator is not None:  # converted in full before anything is written
+    if generator is not None:
         generator = Path(generator)
-        vq_checkpoint = (out / "vq" / "checkpoints" / "last.ckpt").absolute()  # any working folder
-        gen_config = _compose(
-            "train_gen",
-            [f"data={dataset}", f"experiment=gen_{dataset}", f"vq_ckpt={vq_checkpoint}"],
-        )
-        with open_dict(gen_config):
-            gen_config.model.net.update(REFERENCE_GENERATOR)
-        codebook = vq_net.quantizer.codebook_size
-        net = instantiate(gen_config.model.net)(codebook_size=codebook)
-        conversion = _checked(
-            convert_reference_generator(
-                _state(generator, GENERATOR_KEYS, "generator"), net.state_dict()
-            ),
+        vq_checkpoint = out.absolute() / "vq" / "checkpoints" / "last.ckpt"  # any working folder
+        gen_config, net, reports["generator"] = _convert_generator(
             generator,
-            "generator",
+            dataset,
+            vq_net,
+            vq_config.model.net.encoder.width,
+            vq_checkpoint,
+            ignore_options,
         )
-        reports["generator"] = conversion.report()
-        net.load_state_dict(conversion.state)
-        gen = (
+        runs["gen"] = (
             gen_config,
             {
                 "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()},
                 "hyper_parameters": {
-                    "codebook_size": codebook,
+                    "codebook_size": vq_net.quantizer.codebook_size,
                     "vq_digest": weights_digest(vq_net.eval()),
                     "converted_from": str(generator),
                     "reference_options": read_options(generator),
                 },
             },
         )
-    names = ("vq",) if gen is None else ("vq", "gen")
-    with staged_outputs(out, names) as staged:  # both runs appear whole, or nothing does
-        _write_run(staged / "vq", out.absolute() / "vq", vq_config, vq_payload)
-        if gen is not None:
-            _write_run(staged / "gen", out.absolute() / "gen", *gen)
-    return Converted(out / "vq", None if gen is None else out / "gen", reports)
+    with staged_outputs(out, tuple(runs)) as staged:  # both runs appear whole, or nothing does
+        for name, (config, payload) in runs.items():
+            _write_run(staged / name, out.absolute() / name, config, payload)
+    return Converted(out / "vq", out / "gen" if generator is not None else None, reports)

@@ -13,7 +13,7 @@ import hydra
 import lightning as L
 import torch
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf import DictConfig, open_dict
 
 from intermask.config_files import config_dir
 from intermask.utils.checkpoint_io import AtomicCheckpointIO

@@ -382,6 +382,13 @@ def _remask(
             return torch.zeros_like(undecided)
         ratio = cosine_schedule((iteration + 1) / (iterations - 1))
         count = torch.round(ratio * n_generated.double()).clamp(min=1)
+        # ranked as the reference ranks: torch's default (unstable) sort over every position,
+        # the ones that cannot be re-masked at 1e5. Its ties fall in another order than a stable
+        # sort's, and ties are common: while both persons are all [MASK] their positions share
+        # their logits, so a code sampled at both has the same confidence twice.
+        flat = confidence.masked_fill(~undecided, 1e5).flatten(1)
+        ranks = flat.argsort(dim=1).argsort(dim=1).reshape(undecided.shape)
+        return (ranks < count.to(ranks.device).view(-1, *[1] * (ranks.ndim - 1))) & undecided
     else:
         count = scheduled_count(cosine_schedule((iteration + 1) / iterations), n_generated)
     scores = confidence.masked_fill(~undecided, math.inf)

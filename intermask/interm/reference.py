@@ -108,27 +108,52 @@ def convert_reference_generator(
     reported, and its keys without a converted value too.
     """
     out: dict[str, torch.Tensor] = {}
+    sources: dict[str, str] = {}  # ours -> the release key it came from
     dropped, unmapped, computed, mismatched = [], [], [], []
     for key, value in reference.items():
-        if key.startswith(_CLIP_PREFIXES):
-            dropped.append(key)
-            continue
-        if key == _FREQUENCIES:
-            computed.append(key)
-            if not _same_frequencies(value):
-                mismatched.append(f"{key}: not the 2D encoding's frequencies for this width")
-            continue
-        renamed = next((p for p in _RENAMED if key.startswith(p)), None)
-        if renamed is not None:
-            out[_RENAMED[renamed] + key[len(renamed) :]] = value
-            continue
-        if key.startswith("Transformer.blocks."):
-            index, _, rest = key[len("Transformer.blocks.") :].partition(".")
-            if _block_key(rest, f"blocks.{index}", value, out):
-                continue
-        unmapped.append(key)
-    missing, extra, misshaped = compare_with_target(out, target)
-    return Conversion(out, dropped, computed, unmapped + extra, missing, mismatched + misshaped)
+        placed = len(out)
+        _place(key, value, out, dropped, computed, mismatched, unmapped)
+        sources |= dict.fromkeys(list(out)[placed:], key)
+    missing, extra, misshaped = compare_with_target(out, target, sources)
+    return Conversion(
+        out, dropped, computed, unmapped + extra, missing, mismatched + misshaped, WHY
+    )
+
+
+WHY = (
+    "dropped: the frozen CLIP tower the release keeps inside its model (this framework takes "
+    "CLIP's per-token features from the text cache, computed by the same tower)",
+    "computed: the 2D position encoding's frequencies (checked equal to the release's buffer)",
+)
+
+
+def _place(
+    key: str,
+    value: torch.Tensor,
+    out: dict[str, torch.Tensor],
+    dropped: list[str],
+    computed: list[str],
+    mismatched: list[str],
+    unmapped: list[str],
+) -> None:
+    """Put one release key where it belongs (``out``) or in the list that says why not."""
+    if key.startswith(_CLIP_PREFIXES):
+        dropped.append(key)
+        return
+    if key == _FREQUENCIES:
+        computed.append(key)
+        if not _same_frequencies(value):
+            mismatched.append(f"{key}: not the 2D encoding's frequencies for this width")
+        return
+    renamed = next((p for p in _RENAMED if key.startswith(p)), None)
+    if renamed is not None:
+        out[_RENAMED[renamed] + key[len(renamed) :]] = value
+        return
+    if key.startswith("Transformer.blocks."):
+        index, _, rest = key[len("Transformer.blocks.") :].partition(".")
+        if _block_key(rest, f"blocks.{index}", value, out):
+            return
+    unmapped.append(key)
 
 
 def _same_frequencies(value: torch.Tensor) -> bool:

@@ -30,7 +30,9 @@ def staged_outputs(out: str | Path, names: Sequence[str]) -> Iterator[Path]:
         raise FileExistsError(f"{out} exists and is not a folder")
     for name in names:
         if (out / name).exists():
-            raise FileExistsError(f"{out / name} exists: choose another --out (nothing was overwritten)")
+            raise FileExistsError(
+                f"{out / name} exists: choose another --out (nothing was overwritten)"
+            )
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = out.parent / f".{out.name}.{os.getpid()}{TEMPORARY_SUFFIX}"
     shutil.rmtree(staging, ignore_errors=True)  # a dead run of this process id

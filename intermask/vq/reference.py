@@ -92,23 +92,43 @@ def convert_reference_vq(
     model's state dict) adds the missing and mis-shaped keys to the report."""
     out: dict[str, torch.Tensor] = {}
     unmapped, computed = [], []
+    sources: dict[str, str] = {}  # ours -> the release key it came from
     rules = _rules(has_graph_ends(reference))
     for key, value in reference.items():
-        codebook = _CODEBOOK.fullmatch(key)
-        if codebook is not None:
-            layer = f"quantizer.layers.{codebook['layer']}"
-            out[f"{layer}.codebook"] = value
-            out[f"{layer}.ema_sum"] = value.clone()
-            out[f"{layer}.ema_count"] = torch.ones(value.shape[0], dtype=value.dtype)
-            out[f"{layer}.initialized"] = torch.tensor(True)
-            computed += [f"{layer}.ema_sum", f"{layer}.ema_count", f"{layer}.initialized"]
-            continue
-        for pattern, target_key in rules:
-            match = pattern.fullmatch(key)
-            if match is not None:
-                out[target_key(match)] = value
-                break
-        else:
-            unmapped.append(key)
-    missing, extra, mismatched = compare_with_target(out, target)
-    return Conversion(out, [], computed, unmapped + extra, missing, mismatched)
+        placed = len(out)
+        _place(key, value, rules, out, computed, unmapped)
+        sources |= dict.fromkeys(list(out)[placed:], key)
+    missing, extra, mismatched = compare_with_target(out, target, sources)
+    return Conversion(out, [], computed, unmapped + extra, missing, mismatched, WHY)
+
+
+WHY = (
+    "computed: each codebook's EMA statistics (sums = the codes, counts = 1; the release keeps "
+    "only the codebook), so a converted tokenizer can be fine-tuned",
+)
+
+
+def _place(
+    key: str,
+    value: torch.Tensor,
+    rules: list[_Rule],
+    out: dict[str, torch.Tensor],
+    computed: list[str],
+    unmapped: list[str],
+) -> None:
+    """Put one release key where it belongs (``out``) or in ``unmapped``."""
+    codebook = _CODEBOOK.fullmatch(key)
+    if codebook is not None:
+        layer = f"quantizer.layers.{codebook['layer']}"
+        out[f"{layer}.codebook"] = value
+        out[f"{layer}.ema_sum"] = value.clone()
+        out[f"{layer}.ema_count"] = torch.ones(value.shape[0], dtype=value.dtype)
+        out[f"{layer}.initialized"] = torch.tensor(True)
+        computed += [f"{layer}.ema_sum", f"{layer}.ema_count", f"{layer}.initialized"]
+        return
+    for pattern, target_key in rules:
+        match = pattern.fullmatch(key)
+        if match is not None:
+            out[target_key(match)] = value
+            return
+    unmapped.append(key)

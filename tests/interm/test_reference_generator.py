@@ -97,7 +97,12 @@ def test_every_reference_key_lands_on_the_paper_model():
     assert conversion.complete, conversion.report()
     assert sorted(conversion.dropped) == sorted(k for k in layout if k.startswith("clip_"))
     assert set(conversion.state) == set(ours)
-    assert "dropped 5 key(s) on purpose, computed 1 here" in conversion.report()
+    report = conversion.report()
+    assert (
+        "dropped on purpose (5): clip_token_embedding.weight, clip_positional_embedding," in report
+    )
+    assert "computed here (1): position_enc.positional_encoding.inv_freq" in report
+    assert "dropped: the frozen CLIP tower" in report
     assert conversion.computed == ["position_enc.positional_encoding.inv_freq"]
 
 
@@ -144,8 +149,8 @@ def test_unknown_missing_and_misshaped_keys_are_reported_by_name():
     assert conversion.unmapped == ["Transformer.blocks.0.extra_gate.weight"]
     assert conversion.missing == ["head.logits.bias"]
     assert conversion.mismatched == [
-        "condition_projection.weight: ours (384, 768) vs converted (384, 512)"
+        "cond_emb.weight (-> condition_projection.weight): release (384, 512) vs ours (384, 768)"
     ]
     report = conversion.report()
-    assert "reference keys with no place (1): Transformer.blocks.0.extra_gate.weight" in report
-    assert "keys without a value (1): head.logits.bias" in report
+    assert "release keys with no place here (1): Transformer.blocks.0.extra_gate.weight" in report
+    assert "keys of ours without a value (1): head.logits.bias" in report

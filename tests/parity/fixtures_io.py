@@ -61,3 +61,38 @@ def save_fixture(name: str, payload: dict[str, Any]) -> Path:
 
 def load_fixture(name: str) -> dict[str, Any]:
     return torch.load(FIXTURES / f"{name}.pt", weights_only=True)
+
+
+def weight_recipe(
+    state: Mapping[str, torch.Tensor], *, keep: tuple[str, ...] = ()
+) -> dict[str, Any]:
+    """How to rebuild ``state`` with random values of sensible magnitudes: per key either the
+    tensor itself (keys starting with one of ``keep``, e.g. a position encoding's buffer, and
+    integer or boolean tensors) or ``(shape, mean, std)``: matrices and kernels ``N(0, 1/fan_in)``
+    (as a default init: activations keep their size, so a tolerance means something), vectors
+    named ``weight`` (norm scales) ``N(1, 0.1^2)``, other vectors ``N(0, 0.1^2)``, scalars 1."""
+    recipe: dict[str, Any] = {}
+    for key, value in state.items():
+        if key.startswith(keep) or not value.is_floating_point():
+            recipe[key] = value.detach().clone()
+        elif value.ndim >= 2:
+            recipe[key] = (tuple(value.shape), 0.0, float(value[0].numel()) ** -0.5)
+        elif value.ndim == 1:
+            norm = key.endswith("weight")
+            recipe[key] = (tuple(value.shape), 1.0 if norm else 0.0, 0.1)
+        else:
+            recipe[key] = ((), 1.0, 0.0)
+    return recipe
+
+
+def build_state(recipe: Mapping[str, Any], *, seed: int) -> dict[str, torch.Tensor]:
+    """The tensors of a :func:`weight_recipe`, drawn as :func:`seeded_state` draws them."""
+    state = {}
+    for key, entry in recipe.items():
+        if isinstance(entry, torch.Tensor):
+            state[key] = entry.clone()
+            continue
+        shape, mean, std = entry
+        values = np.random.RandomState(key_seed(seed, key)).standard_normal(shape) * std + mean
+        state[key] = torch.from_numpy(np.asarray(values, dtype=np.float32))
+    return state

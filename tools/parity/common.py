@@ -29,9 +29,11 @@ for _folder in (REPO, REPO / "tests" / "parity"):
 from fixtures_io import (  # noqa: E402
     FIXTURES,
     MAX_FIXTURE_BYTES,
+    build_state,
     load_fixture,
     save_fixture,
     seeded_state,
+    weight_recipe,
 )
 
 __all__ = [
@@ -42,13 +44,26 @@ __all__ = [
     "reference_modules",
     "save_fixture",
     "seeded_state",
+    "weight_recipe",
+    "build_state",
     "clip_stub",
     "max_abs",
 ]
 
 # top-level package names the authors' repositories use, which a second checkout would shadow
-_THEIR_PACKAGES = ("models", "utils", "data", "options", "common", "dataset", "motion_loaders",
-                   "datasets", "configs", "tools", "visualization")
+_THEIR_PACKAGES = (
+    "models",
+    "utils",
+    "data",
+    "options",
+    "common",
+    "dataset",
+    "motion_loaders",
+    "datasets",
+    "configs",
+    "tools",
+    "visualization",
+)
 
 
 def parser(description: str, *, marker: str) -> argparse.ArgumentParser:
