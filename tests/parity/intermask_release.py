@@ -56,9 +56,9 @@ def _motion(shape: tuple[int, ...], seed: int) -> torch.Tensor:
     return torch.from_numpy(np.random.RandomState(seed).standard_normal(shape).astype(np.float32))
 
 
-def _vq_inputs(feature_shape: tuple[int, ...]) -> Callable[[], dict[str, torch.Tensor]]:
-    def inputs() -> dict[str, torch.Tensor]:
-        codes = np.random.RandomState(2).randint(0, 32, size=(2, 5 * 4, 1))  # (B, N, Q)
+def _vq_inputs(feature_shape: tuple[int, ...]) -> Callable[[int], dict[str, torch.Tensor]]:
+    def inputs(codebook: int) -> dict[str, torch.Tensor]:
+        codes = np.random.RandomState(2).randint(0, codebook, size=(2, 5 * 4, 1))  # (B, N, Q)
         return {"motion": _motion((2, 16, *feature_shape), 1), "codes": torch.from_numpy(codes)}
 
     return inputs
@@ -86,6 +86,16 @@ CASES: dict[str, dict[str, Any]] = {
                           "inputs": _generator_inputs},
 }  # fmt: skip
 GENERATOR_CASES = ("generator", "generator_8_heads")
+PAPER_SIZE = {  # InterMask appendix C: the released models' widths
+    "vq": {"nb_code": "1024", "code_dim": "512", "output_emb_width": "512", "width": "512"},
+    "generator": {"latent_dim": "384", "n_layers": "6", "ff_size": "1024"},
+}
+
+
+def use_paper_size() -> None:
+    """Every case at the paper's widths (the parity script's ``--size paper``; no fixture)."""
+    for case in CASES.values():
+        case["options"] = {**case["options"], **PAPER_SIZE["generator" if "vq" in case else "vq"]}
 
 
 def tokenize(texts: list[str] | str, truncate: bool = True) -> torch.Tensor:

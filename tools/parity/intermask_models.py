@@ -34,6 +34,7 @@ from intermask_release import (  # noqa: E402
     our_logits,
     text_features,
     tokenize,
+    use_paper_size,
 )
 
 SEED = 20261128
@@ -103,7 +104,7 @@ def _vq_case(name: str, case: dict, folder: Path, record: dict) -> dict[str, flo
     net = reference_vq(case["options"], dataset, folder / "theirs")
     recipe = common.weight_recipe(_release_state(net))
     net.load_state_dict(common.build_state(recipe, seed=SEED), strict=False)
-    inputs = case["inputs"]()
+    inputs = case["inputs"](int(case["options"]["nb_code"]))
     with torch.no_grad():
         latent = net.encoder(net.preprocess(inputs["motion"]))
         decoded = net.forward_decoder(inputs["codes"])
@@ -173,7 +174,13 @@ def _decoding(net, ours, features, inputs, record: dict, seeds=(0, 1, 2, 3, 4)) 
 
 def main() -> int:
     cli = common.parser(__doc__.splitlines()[0], marker="models/mask_transformer/transformer.py")
+    cli.add_argument("--size", choices=("reduced", "paper"), default="reduced",
+                     help="reduced widths (the fixture's) or the paper's (no fixture)")  # fmt: skip
     args = cli.parse_args()
+    if args.size == "paper":
+        if args.write_fixture:
+            cli.error("the fixture is written at reduced widths only (it must stay small)")
+        use_paper_size()
     _patch_cuda()
     torch.set_grad_enabled(False)
     record: dict = {"seed": SEED}
