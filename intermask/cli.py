@@ -169,9 +169,44 @@ def _generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _convert_momask(args: argparse.Namespace) -> int:
+    from intermask.convert_momask import convert_momask
+
+    if args.mean is not None or args.std is not None:
+        raise ValueError(
+            "a MoMask release reads its statistics from <vq name>/meta/ (no --mean/--std)"
+        )
+    done = convert_momask(
+        vq=Path(args.vq),
+        mask=None if args.generator is None else Path(args.generator),
+        residual=None if args.residual is None else Path(args.residual),
+        out=args.out,
+        text=args.text or "clip_vit_b32",
+        clip=args.clip,
+        ignore_options=args.ignore_option or (),
+    )
+    for name, report in done.reports.items():
+        print(f"{name}: {report}")
+    for name, run in done.runs.items():
+        print(f"{name} run: {run}")
+    if "mask" in done.runs:
+        residual = f" --residual {done.runs['residual']}" if "residual" in done.runs else ""
+        print(f'intermask generate --checkpoint {done.runs["mask"]}{residual} --text "..."')
+    return 0
+
+
 def _convert_reference(args: argparse.Namespace) -> int:
     from intermask.convert import convert_reference
+    from intermask.convert_momask import is_momask_release
 
+    if (
+        args.residual is not None
+        or args.dataset == "t2m"
+        or (args.dataset is None and is_momask_release(Path(args.vq)))
+    ):
+        return _convert_momask(args)
+    if args.text is not None or args.clip is not None:
+        raise ValueError("--text and --clip are for a MoMask release (opt.txt dataset_name t2m)")
     if (args.mean is None) != (args.std is None):
         raise ValueError("--mean and --std go together (the release's global_mean/std.npy)")
     done = convert_reference(
@@ -367,12 +402,26 @@ def build_parser() -> argparse.ArgumentParser:
         "convert-reference",
         help="the authors' released checkpoints -> run folders of this framework",
         description="Reads <name>/model/<which>.tar beside <name>/opt.txt (weights only) and writes "
-        "OUT/vq and OUT/gen run folders with the reference behaviours on (docs/fidelity.md).",
+        "OUT/vq and OUT/gen run folders with the reference behaviours on (docs/fidelity.md). A "
+        "MoMask release (opt.txt dataset_name t2m) gives OUT/vq, OUT/mask and OUT/residual.",
     )
     convert.add_argument("--vq", required=True, help="the release's VQ-VAE checkpoint (.tar)")
     convert.add_argument("--generator", help="the release's transformer checkpoint (.tar)")
     convert.add_argument("--out", required=True, type=_output_folder, help="output folder")
-    convert.add_argument("--dataset", choices=("interhuman", "interx"), help="default: opt.txt's")
+    convert.add_argument(
+        "--dataset", choices=("interhuman", "interx", "t2m"), help="default: opt.txt's"
+    )
+    convert.add_argument(
+        "--residual",
+        help="MoMask: the release's residual transformer (.tar; --generator is its "
+        "masked transformer); writes OUT/vq, OUT/mask and OUT/residual",
+    )
+    convert.add_argument(
+        "--text",
+        help="MoMask: the text config of the converted transformers (configs/text/; "
+        "default clip_vit_b32), whose CLIP text projection is folded into their condition layer",
+    )
+    convert.add_argument("--clip", help="MoMask: a local CLIP checkpoint for that text encoder")
     convert.add_argument("--mean", help="the release's global_mean.npy (InterHuman)")
     convert.add_argument("--std", help="the release's global_std.npy (InterHuman)")
     convert.add_argument(
