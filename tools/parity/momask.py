@@ -32,11 +32,15 @@ from torch import nn
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 from test_parity_momask import (  # noqa: E402
+    DECODING_SEEDS,
     EXACT,
     FILES,
     FIXTURE,
+    ITERATIONS,
+    MASK_CFG,
     RESIDUAL_CFG,
     TOLERANCES,
+    TOP_K,
     convert,
     our_outputs,
     valid_steps,
@@ -45,6 +49,7 @@ from test_parity_momask import (  # noqa: E402
 
 from intermask.convert_momask import clip_text_projection  # noqa: E402
 from intermask.momask.model import sentence_features  # noqa: E402
+from intermask.momask.sampler import decode_base  # noqa: E402
 
 SEED = 20261129
 MARKER = "models/mask_transformer/transformer.py"
@@ -212,6 +217,12 @@ def their_outputs(nets: dict[str, nn.Module], inputs: dict, sentence: torch.Tens
     decoded = residual.generate(base.clamp_min(0), CAPTIONS, lengths, temperature=0,
                                 cond_scale=RESIDUAL_CFG)  # fmt: skip
     out["residual_tokens"] = decoded.permute(0, 2, 1)
+    seeded = []
+    for seed in DECODING_SEEDS:  # their base decoding, seeded as their gen_t2m seeds it
+        torch.manual_seed(seed)
+        seeded.append(mask.generate(CAPTIONS, lengths, timesteps=ITERATIONS, cond_scale=MASK_CFG,
+                                    temperature=1, topk_filter_thres=1 - TOP_K))  # fmt: skip
+    out["base_tokens"] = torch.stack(seeded)
     out["pad_drawn"] = int((decoded[valid] == -1).sum())  # [PAD] drawn at a valid step
     return out
 
@@ -245,7 +256,8 @@ def run_case(name: str, options: dict, root: Path, seed: int, sentence: torch.Te
     case["inputs"] = _inputs(options, seed)
     theirs = their_outputs(nets, case["inputs"], sentence)
     pad_drawn = theirs.pop("pad_drawn")
-    ours = our_outputs(convert(paths, root / name / "out"), case["inputs"], CAPTIONS)
+    ours_nets = convert(paths, root / name / "out")
+    ours = our_outputs(ours_nets, case["inputs"], CAPTIONS)
     print(f"{name}:")
     for key in TOLERANCES:
         diff = common.max_abs(ours[key], theirs[key].reshape(ours[key].shape))
@@ -255,6 +267,15 @@ def run_case(name: str, options: dict, root: Path, seed: int, sentence: torch.Te
         differ = int((ours[key] != theirs[key].reshape(ours[key].shape)).sum())
         print(f"  {key:22s} {'equal' if same else f'{differ} differ'}")
     print(f"  their greedy residual decoding drew [PAD] at {pad_drawn} valid step(s)")
+    sampler = decode_base(ours_nets.mask.net, ours_nets.text(CAPTIONS), case["inputs"]["lengths"],
+                          iterations=ITERATIONS, cfg_scale=MASK_CFG, top_k_ratio=TOP_K,
+                          generator=[torch.Generator().manual_seed(0)] * 2)  # fmt: skip
+    same = int(torch.equal(sampler, theirs["base_tokens"][0]))
+    print(
+        f"  our sampler's decode_base (paper schedule, per-sample noise), seed 0: "
+        f"{'equal' if same else 'differs'} ({int((sampler != theirs['base_tokens'][0]).sum())} "
+        "tokens)"
+    )
     case["outputs"] = theirs
     return case
 
