@@ -19,7 +19,9 @@ are converted before anything is written; the folders then appear whole, or not 
 The transformers condition on CLIP's projected sentence embedding; this framework's text cache
 holds the feature before CLIP's text projection, so the conversion folds the projection of the
 run's text encoder (``text``, by default MoMask's CLIP ViT-B/32) into the condition layer. The
-reference behaviours of training are switched on (docs/fidelity.md rows 6-7 and 12-15).
+reference behaviours of fine-tuning are switched on (docs/fidelity.md rows 6-7, 12, 13 and 15);
+the depth is the release's (``n_layers``, row 11). Decoding settings are not part of a run: the
+reference samples its residual layers (row 14), ``intermask generate --residual-temperature 1``.
 """
 
 from __future__ import annotations
