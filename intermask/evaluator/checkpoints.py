@@ -8,7 +8,8 @@ Released files:
   state dicts ``movement_encoder``, ``text_encoder`` and ``motion_encoder`` (plus optimizer
   state and ``epoch``). T2M's HumanML3D release keeps the statistics its matcher z-scores motion
   with in another run folder of the same tree: ``t2m/text_mot_match/model/finest.tar`` and
-  ``t2m/Comp_v6_KLD01/meta/{mean,std}.npy`` (263 values each).
+  ``t2m/Comp_v6_KLD01/meta/{mean,std}.npy`` (263 values each; MoMask's evaluator zip has them
+  in ``t2m/Comp_v6_KLD005/meta``, which its evaluation reads).
 
 Both are mapped onto our module names (:func:`released_interclip_state`,
 :func:`released_t2m_state`); :func:`load_state` then reports every missing, unexpected and
@@ -38,6 +39,7 @@ T2M_PARTS = ("movement_encoder", "text_encoder", "motion_encoder")
 T2M_FIRST_CONV = "main.0.weight"  # movement encoder's first Conv1d: (hidden, input channels, 4)
 T2M_META_FILES = ("mean.npy", "std.npy")
 T2M_META_RUN = "Comp_v6_KLD01"  # the T2M run whose meta/ the evaluation code normalizes with
+MOMASK_META_RUN = "Comp_v6_KLD005"  # the same statistics in MoMask's evaluator zip
 VOCABULARY_KEY = "evaluator_vocabulary"  # a GRU matcher's words, in our checkpoints
 
 
@@ -165,8 +167,13 @@ def released_t2m_input_size(checkpoint: dict[str, Any]) -> int | None:
 
 
 def default_t2m_meta_dir(path: str | Path) -> Path:
-    """``t2m/Comp_v6_KLD01/meta`` for ``t2m/text_mot_match/model/finest.tar`` (the release tree)."""
-    return Path(path).parent.parent.parent / T2M_META_RUN / "meta"
+    """``t2m/Comp_v6_KLD01/meta`` for ``t2m/text_mot_match/model/finest.tar`` (T2M's release
+    tree), or ``t2m/Comp_v6_KLD005/meta`` where only that one holds ``mean.npy`` (MoMask's)."""
+    runs = Path(path).parent.parent.parent
+    for run in (T2M_META_RUN, MOMASK_META_RUN):
+        if (runs / run / "meta" / T2M_META_FILES[0]).is_file():
+            return runs / run / "meta"
+    return runs / T2M_META_RUN / "meta"
 
 
 def released_t2m_statistics(meta_dir: str | Path, *, feature_shape: tuple[int, ...]) -> Normalizer:
@@ -176,7 +183,8 @@ def released_t2m_statistics(meta_dir: str | Path, *, feature_shape: tuple[int, .
     if missing:
         raise FileNotFoundError(
             f"{', '.join(missing)}: the released evaluator's statistics are missing (T2M ships "
-            f"them as t2m/{T2M_META_RUN}/meta/, beside t2m/text_mot_match/model/finest.tar): "
+            f"them as t2m/{T2M_META_RUN}/meta/, MoMask as t2m/{MOMASK_META_RUN}/meta/, beside "
+            "t2m/text_mot_match/model/finest.tar): "
             f"pass meta_dir=<folder with {' and '.join(T2M_META_FILES)}>"
         )
     mean_path, std_path = (meta_dir / name for name in T2M_META_FILES)

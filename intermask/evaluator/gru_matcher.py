@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from typing import Literal
 
 import torch
+import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 from torch.nn.utils.rnn import pack_padded_sequence
@@ -33,7 +34,7 @@ from torch.nn.utils.rnn import pack_padded_sequence
 from intermask.evaluator.interclip import check_captions, check_lengths
 from intermask.evaluator.vocabulary import (
     DEFAULT_GLOVE_PREFIX,
-    DEFAULT_MAX_WORDS,
+    INTERX_MAX_WORDS,
     POS_CLASSES,
     Vocabulary,
     load_glove,
@@ -43,6 +44,7 @@ from intermask.motion.rotations import rot6d_to_matrix
 
 NUM_ROWS, PERSON_CHANNELS = 56, 6
 TRANSLATION_ROW = 55
+INTERX_MAX_FRAMES = 150  # InterMask's max_motion_length for Inter-X
 WordVectors = Literal["learned", "glove"]
 Rot6dInput = Literal["as_is", "pytorch3d"]
 
@@ -132,8 +134,12 @@ class T2MMatcher(nn.Module):
         glove_dir, glove_prefix: the reference GloVe files (see ``vocabulary``).
         vocabulary: the words of the embedding when known at construction (rebuilding a trained
             evaluator); a learned evaluator otherwise gets them from ``set_vocabulary``.
-        max_words: tokens kept per caption before sos/eos (20 in T2M and InterMask).
+        max_words: tokens kept per caption before sos/eos (max_text_len: 20 in T2M and MoMask,
+            35 in InterMask's Inter-X evaluation).
         unit_length: frames per movement step (4; the convolutions halve time twice).
+        max_frames: the reference pads every motion with zero frames to its dataset's
+            max_motion_length (150 Inter-X, 196 HumanML3D) before the movement encoder;
+            shorter inputs are padded to it here (see ``encode_motion``).
         word_dim, movement_hidden, movement_latent, motion_hidden, text_hidden, embed_dim:
             T2M sizes (300, 512, 512, 1024, 512, 512).
     """
@@ -151,6 +157,7 @@ class T2MMatcher(nn.Module):
         vocabulary: Sequence[str] | None,
         max_words: int,
         unit_length: int,
+        max_frames: int,
         word_dim: int,
         movement_hidden: int,
         movement_latent: int,
@@ -169,6 +176,7 @@ class T2MMatcher(nn.Module):
             )
         self.word_source, self.word_dim = word_vectors, word_dim
         self.max_words, self.unit_length = max_words, unit_length
+        self.max_frames = max_frames
         self.embed_dim = embed_dim
         self.movement_encoder = MovementConvEncoder(
             input_size=self.motion_input_size,
@@ -246,7 +254,14 @@ class T2MMatcher(nn.Module):
                 f"every length must be >= unit_length {self.unit_length}, got min {int(lengths.min())}"
             )
         motion, lengths = motion.to(self.device), lengths.to(self.device)
-        movements = self.movement_encoder(self.prepare_motion(motion, lengths))  # (B, T/4, latent)
+        frames = self.prepare_motion(motion, lengths)  # (B, T, C), zero after each length
+        if frames.shape[1] < self.max_frames:
+            # The reference pads every motion with zero frames to max_motion_length. A motion
+            # that ends within 2 frames of the tensor's end has its last movement step read the
+            # second convolution's zero padding where the reference reads the first
+            # convolution of zero frames (its bias, activated): a different embedding.
+            frames = F.pad(frames, (0, 0, 0, self.max_frames - frames.shape[1]))
+        movements = self.movement_encoder(frames)  # (B, T/4, latent)
         steps = (lengths // self.unit_length).clamp(max=movements.shape[1])
         return self.motion_encoder(movements, steps)
 
@@ -291,8 +306,9 @@ class GRUMatcher(T2MMatcher):
         glove_dir: str | None = None,
         glove_prefix: str = DEFAULT_GLOVE_PREFIX,
         vocabulary: Sequence[str] | None = None,
-        max_words: int = DEFAULT_MAX_WORDS,
+        max_words: int = INTERX_MAX_WORDS,
         unit_length: int = 4,
+        max_frames: int = INTERX_MAX_FRAMES,
         word_dim: int = 300,
         movement_hidden: int = 512,
         movement_latent: int = 512,
@@ -310,6 +326,7 @@ class GRUMatcher(T2MMatcher):
             vocabulary=vocabulary,
             max_words=max_words,
             unit_length=unit_length,
+            max_frames=max_frames,
             word_dim=word_dim,
             movement_hidden=movement_hidden,
             movement_latent=movement_latent,

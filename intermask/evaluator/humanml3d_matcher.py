@@ -27,6 +27,7 @@ from intermask.motion.humanml3d import FEATURE_DIM, FOOT_CONTACTS
 from intermask.motion.masks import length_mask
 
 STATISTICS_BUFFERS = ("mean", "std", "has_statistics")  # not in a released finest.tar
+HUMANML3D_MAX_FRAMES = 196  # T2M's and MoMask's max_motion_length
 
 
 class HumanML3DMatcher(T2MMatcher):
@@ -51,6 +52,7 @@ class HumanML3DMatcher(T2MMatcher):
         vocabulary: Sequence[str] | None = None,
         max_words: int = DEFAULT_MAX_WORDS,
         unit_length: int = 4,
+        max_frames: int = HUMANML3D_MAX_FRAMES,
         word_dim: int = 300,
         movement_hidden: int = 512,
         movement_latent: int = 512,
@@ -69,6 +71,7 @@ class HumanML3DMatcher(T2MMatcher):
             vocabulary=vocabulary,
             max_words=max_words,
             unit_length=unit_length,
+            max_frames=max_frames,
             word_dim=word_dim,
             movement_hidden=movement_hidden,
             movement_latent=movement_latent,

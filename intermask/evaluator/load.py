@@ -61,7 +61,8 @@ def load_evaluator(
     glove_dir, glove_prefix: GloVe files of a released T2M matcher (its word vectors are not in
         ``finest.tar``); the prefix defaults to the dataset's (``hhi_vab``, ``our_vab``).
     meta_dir: the released HumanML3D matcher's ``mean.npy`` and ``std.npy``; default
-        ``t2m/Comp_v6_KLD01/meta`` of the release tree ``finest.tar`` is in.
+        ``t2m/Comp_v6_KLD01/meta`` of the release tree ``finest.tar`` is in (MoMask's tree:
+        ``t2m/Comp_v6_KLD005/meta``).
     trusted: allow unpickling Python objects beyond tensors (older Lightning checkpoints).
     net: the network a *released* file is loaded into; default the paper configuration
         (InterCLIP over ViT-L/14@336px embeddings; the dataset's T2M matcher with GloVe from

@@ -68,7 +68,8 @@ VIP_WORDS = {
 VIP_CLASS = {word: cls for cls, words in VIP_WORDS.items() for word in words}
 START, END, UNKNOWN = "sos", "eos", "unk"
 SPECIAL_WORDS = (START, END, UNKNOWN)
-DEFAULT_MAX_WORDS = 20  # max_text_len of T2M (HumanML3D) and InterMask (Inter-X; 35 only for "hhi")
+DEFAULT_MAX_WORDS = 20  # max_text_len of T2M and MoMask (HumanML3D)
+INTERX_MAX_WORDS = 35  # max_text_len InterMask's eval.py sets for Inter-X
 DEFAULT_GLOVE_PREFIX = "hhi_vab"  # InterMask's Inter-X vocabulary
 HUMANML3D_GLOVE_PREFIX = "our_vab"  # T2M's HumanML3D vocabulary
 

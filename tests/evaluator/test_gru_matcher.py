@@ -40,9 +40,12 @@ def test_outputs_stay_in_input_order_and_match_the_sorted_reference(gru):
     motion, lengths = interx_batch(batch=5)
     with torch.no_grad():
         ours = gru.encode_motion(motion, lengths)
-        # the reference: sort by length, pack sorted, movement steps = length // 4
+        # the reference: zero frames up to max_motion_length, sort by length, pack sorted,
+        # movement steps = length // 4
         order = torch.argsort(lengths, descending=True)
-        movements = gru.movement_encoder(gru.prepare_motion(motion[order], lengths[order]))
+        frames = gru.prepare_motion(motion[order], lengths[order])
+        frames = torch.nn.functional.pad(frames, (0, 0, 0, gru.max_frames - frames.shape[1]))
+        movements = gru.movement_encoder(frames)
         head = gru.motion_encoder
         packed = pack_padded_sequence(
             head.input_emb(movements), (lengths[order] // 4).tolist(), batch_first=True

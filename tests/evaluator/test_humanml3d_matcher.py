@@ -37,11 +37,14 @@ def test_outputs_stay_in_input_order_and_match_the_sorted_reference():
     motion, lengths = humanml3d_batch(batch=5)
     with torch.no_grad():
         ours = net.encode_motion(motion, lengths)
-        # the reference: z-score with meta mean/std, pad with zeros, drop the last 4 dims, sort
+        # the reference: z-score with meta mean/std, pad with zeros to max_motion_length, drop
+        # the last 4 dims, sort
         order = torch.argsort(lengths, descending=True)
         normalized = (motion[order] - mean) / std
         for row, length in enumerate(lengths[order]):
             normalized[row, length:] = 0.0
+        padding = net.max_frames - normalized.shape[1]
+        normalized = torch.nn.functional.pad(normalized, (0, 0, 0, padding))
         movements = net.movement_encoder(normalized[..., :-4])
         head = net.motion_encoder
         packed = pack_padded_sequence(
