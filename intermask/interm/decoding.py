@@ -380,8 +380,11 @@ def _remask(
     if schedule == "reference":
         if iteration == iterations - 1:
             return torch.zeros_like(undecided)
-        ratio = cosine_schedule((iteration + 1) / (iterations - 1))
-        count = torch.round(ratio * n_generated.double()).clamp(min=1)
+        # in float32 from torch.linspace, as the reference computes it: there gamma(2/3) is
+        # 0.49999997, so an odd count (a reaction's, one person) rounds down where float64 rounds up
+        tau = torch.linspace(0, 1, iterations)[iteration + 1]
+        ratio = torch.cos(tau * math.pi * 0.5)
+        count = torch.round(ratio * n_generated.to(ratio.device)).clamp(min=1)
         # ranked as the reference ranks: torch's default (unstable) sort over every position,
         # the ones that cannot be re-masked at 1e5. Its ties fall in another order than a stable
         # sort's, and ties are common: while both persons are all [MASK] their positions share
