@@ -12,7 +12,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "intermask"
 STAGES = [
-    ["utils", "config_files"],
+    ["utils", "config_files", "release_options"],
     ["motion"],
     ["physics"],
     ["data"],
@@ -22,8 +22,8 @@ STAGES = [
     ["interm"],
     ["evaluator", "reaction", "render", "momask"],
     ["evaluation"],
-    ["train", "generate", "convert"],
-    ["evaluate", "overfit", "bench"],
+    ["train", "generate", "convert", "convert_momask"],
+    ["evaluate", "overfit", "overfit_momask", "bench"],
     ["cli", "<package>"],
 ]
 RANK = {name: level for level, names in enumerate(STAGES) for name in names}
