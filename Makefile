@@ -22,7 +22,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo demo-momask overfit bench tb clean checkpoints parity-env parity
+.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo demo-momask overfit overfit-momask bench tb clean checkpoints parity-env parity
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -148,6 +148,11 @@ OVERFIT_DIR ?= outputs/overfit
 overfit: install ## memorisation check: VQ-VAE + Inter-M on 14 clips (one per action), then all 14 captions must succeed
 	$(PY) -m intermask.overfit --out $(OVERFIT_DIR) $(ARGS)
 
+OVERFIT_MOMASK_DIR ?= outputs/overfit_momask
+
+overfit-momask: install ## MoMask memorisation check: RVQ + masked + residual transformers on 8 clips; every layer memorised, residual layers closer than the base
+	$(PY) -m intermask.overfit_momask --out $(OVERFIT_MOMASK_DIR) $(ARGS)
+
 # The authors' checkouts for `make parity` (tools/parity/README.md); none is needed by any other target.
 REFERENCE_INTERMASK ?= ../InterMask
 REFERENCE_MOMASK ?= ../momask-codes
@@ -161,6 +166,7 @@ parity-env: ## .venv-parity: this package plus what the authors' modules import 
 parity: ## run the parity scripts against the authors' code: make parity REFERENCE_INTERMASK=../InterMask REFERENCE_MOMASK=../momask-codes [ARGS=--write-fixture]
 	@test -x $(PARITY_PY) || $(MAKE) parity-env
 	$(PARITY_PY) tools/parity/intermask_models.py --reference $(REFERENCE_INTERMASK) $(ARGS)
+	$(PARITY_PY) tools/parity/momask.py --reference $(REFERENCE_MOMASK) $(ARGS)
 
 bench: install ## speed of the hot paths against this machine's measured peak: make bench [ARGS="--threads 1 --size demo"]
 	$(PY) -m intermask.bench $(ARGS)
