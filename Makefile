@@ -167,6 +167,8 @@ parity: ## run the parity scripts against the authors' code: make parity REFEREN
 	@test -x $(PARITY_PY) || $(MAKE) parity-env
 	$(PARITY_PY) tools/parity/intermask_models.py --reference $(REFERENCE_INTERMASK) $(ARGS)
 	$(PARITY_PY) tools/parity/momask.py --reference $(REFERENCE_MOMASK) $(ARGS)
+	$(PARITY_PY) tools/parity/evaluators.py --reference-intermask $(REFERENCE_INTERMASK) \
+		--reference-momask $(REFERENCE_MOMASK) $(ARGS)
 
 bench: install ## speed of the hot paths against this machine's measured peak: make bench [ARGS="--threads 1 --size demo"]
 	$(PY) -m intermask.bench $(ARGS)
