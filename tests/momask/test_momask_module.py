@@ -205,3 +205,43 @@ def test_errors_name_the_problem(text_cache, optimizer):
     residual = _residual_module(text_cache, optimizer)
     with pytest.raises(ValueError, match=r"base_tokens must be \(B, T'\) or \(B, Q', 1, T'\)"):
         residual.generate(None, torch.zeros(2, 3, 4, dtype=torch.long), [16, 16])
+
+
+def test_residual_training_learns_codes_only_the_layers_below_predict(
+    text_cache, optimizer, monkeypatch
+):
+    """One caption for every sample, random base codes and layer j's codes a fixed permutation of
+    layer j-1's: only the summed embeddings of the layers below can tell them (the caption and
+    the position, which are enough to memorise clips, give the marginal rate 1/16), so the module
+    trains on the history it is meant to read."""
+    torch.manual_seed(0)
+    module = _residual_module(text_cache, optimizer)
+    permutations = [torch.randperm(16) for _ in range(3)]
+
+    def tokens(batch):
+        codes = torch.empty(32, 3, 8, dtype=torch.long)
+        codes[:, 0] = torch.randint(0, 16, (32, 8))
+        for layer in (1, 2):
+            codes[:, layer] = permutations[layer][codes[:, layer - 1]]
+        return codes, torch.full((32,), 8)
+
+    monkeypatch.setattr(module, "tokenize", tokens)
+    batch = {"caption": ["a person walks"] * 32}
+    step = torch.optim.AdamW(module.parameters(), lr=3e-3)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # process time on a loaded machine (see the first test)
+    try:
+        start = time.process_time()
+        for _ in range(300):
+            loss = module.compute_losses(batch, condition_drop=0.1).total
+            step.zero_grad()
+            loss.backward()
+            step.step()
+        seconds = time.process_time() - start
+        module.eval()
+        with torch.no_grad():
+            accuracy = module.compute_losses(batch, condition_drop=0.0).accuracy
+    finally:
+        torch.set_num_threads(threads)
+    assert float(accuracy) > 0.9, float(accuracy)
+    assert seconds < 10.0, seconds
