@@ -8,6 +8,7 @@ print the table. ``make eval`` wraps it.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Iterator
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -19,6 +20,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from intermask.evaluation.protocol import MotionSource, ProtocolConstants, ProtocolRunner
+from intermask.evaluation.reference_order import ReferenceOrderLoop
 from intermask.evaluation.report import markdown_table, write_results
 from intermask.evaluation.sources import (
     ARFlowReaction,
@@ -37,6 +39,7 @@ from intermask.utils.run_record import write_run_record
 
 log = logging.getLogger(__name__)
 MODES = ("interaction", "reaction", "reconstruction", "text_to_motion")
+ORDERS = ("batched", "reference")  # batched: keyed draws (the default); reference: eval.py's order
 SINGLE_PERSON = ("humanml3d",)  # dataset kinds of the text-to-motion table
 
 
@@ -227,6 +230,14 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     """Run the protocol of ``cfg`` -> the result dictionary (also written to the run folder)."""
     if cfg.mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {cfg.mode!r}")
+    order = cfg.get("order", "batched")
+    if order not in ORDERS:
+        raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
+    if order == "reference" and (cfg.mode != "interaction" or cfg.reconstruction_row):
+        raise ValueError(
+            "order=reference replays the authors' eval.py loop: mode=interaction without "
+            f"reconstruction_row, got mode={cfg.mode}, reconstruction_row={cfg.reconstruction_row}"
+        )
     unknown = sorted(set(cfg.penetration.modes) - set(MODES))
     if unknown:
         raise ValueError(f"penetration.modes: unknown mode(s) {unknown}; expected some of {MODES}")
@@ -245,7 +256,10 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
 
     released = cfg.get("released_evaluator") or {}
     evaluator = load_evaluator(
-        cfg.eval_ckpt, glove_dir=released.get("glove_dir"), meta_dir=released.get("meta_dir")
+        cfg.eval_ckpt,
+        glove_dir=released.get("glove_dir"),
+        meta_dir=released.get("meta_dir"),
+        net=_released_interclip(released.get("interclip")),
     ).to(device)
     sources, checkpoints = build_sources(cfg, datamodule.normalizer, device)
 
@@ -254,7 +268,7 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
             yield _on(batch, device)
 
     ground_truth = GroundTruth(normalizer=datamodule.normalizer)
-    runner = ProtocolRunner(
+    runner: ProtocolRunner | ReferenceOrderLoop = ProtocolRunner(
         loader=loader,
         evaluator=evaluator,
         ground_truth=ground_truth,
@@ -269,8 +283,11 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         joints=motion_joints,
         success_thresholds=success_thresholds,
     )
+    if order == "reference":
+        runner = _reference_order_loop(cfg, datamodule, evaluator, sources[0], constants)
     header = {
         "mode": cfg.mode,
+        "order": order,
         "dataset": f"{cfg.data.dataset} ({cfg.data.root})",
         "split": cfg.split,
         "replications": replications,
@@ -289,12 +306,54 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         "success_thresholds": asdict(success_thresholds),
         "device": str(device),
     }
+    start = time.process_time()
     result = runner.run(header)
+    # CPU seconds of the protocol itself (models and data already loaded; all threads)
+    result.header["protocol_cpu_s"] = round(time.process_time() - start, 3)
     json_path, markdown_path = write_results(result, output_dir)
     _log_tensorboard(result, output_dir / "tensorboard")
     print(markdown_path.read_text())
     print(f"results: {json_path} and {markdown_path}")
     return result.to_dict()
+
+
+def _released_interclip(sizes: Any):
+    """The network a released ``interclip.ckpt`` is loaded into: the paper's (None) or InterGen's
+    architecture at the sizes of its ``eval_model.yaml`` (``released_evaluator.interclip``:
+    width, layers, heads, ff, text_ff, ...), e.g. a reduced one made for a CPU check."""
+    if not sizes:
+        return None
+    from intermask.evaluator.interclip import InterCLIP
+    from intermask.evaluator.load import RELEASED_CLIP_MODEL
+
+    return InterCLIP(clip_model_name=RELEASED_CLIP_MODEL, **OmegaConf.to_container(sizes))
+
+
+def _reference_order_loop(cfg: DictConfig, datamodule, evaluator, source, constants):
+    """``order=reference``: the generation row of ``source`` in the authors' loop's order of
+    draws (:mod:`intermask.evaluation.reference_order`), streams from ``reference_state`` or
+    seeded with the protocol seed."""
+    from intermask.evaluation.reference_order import (
+        ReferenceItems,
+        ReferenceOrderLoop,
+        Streams,
+        sampler_generation,
+    )
+
+    dataset = datamodule.datasets[cfg.split]
+    if cfg.get("reference_state"):
+        streams = Streams.load(cfg.reference_state)
+    else:
+        lines = dataset.split_file.read_text(encoding="utf-8").splitlines()
+        streams = Streams.seeded(constants.seed, split_lines=len(lines))
+    return ReferenceOrderLoop(
+        items=ReferenceItems.from_interhuman(dataset),
+        evaluator=evaluator,
+        generate=sampler_generation(source.sampler, streams),
+        constants=constants,
+        streams=streams,
+        progress=lambda message: log.info("%s", message),
+    )
 
 
 def _log_tensorboard(result, directory: Path) -> None:
