@@ -113,6 +113,8 @@ class MoMaskSettings:
     top_k_ratio: float
     temperature: float
     residual_temperature: float
+    schedule: str = SCHEDULE
+    noise: str = NOISE
     fps: float = float(hml.FPS)
 
     def sampler_arguments(self) -> dict[str, Any]:
@@ -633,6 +635,8 @@ def momask_settings(request: Request, defaults: dict[str, Any]) -> MoMaskSetting
         top_k_ratio=float(pick(request.top_k, "top_k_ratio")),
         temperature=float(pick(request.temperature, "temperature")),
         residual_temperature=float(pick(request.residual_temperature, "residual_temperature")),
+        schedule=str(pick(request.schedule, "schedule")),
+        noise=str(pick(request.noise, "noise")),
         fps=float(pick(request.fps, "fps")),
     )
 

@@ -150,6 +150,8 @@ def test_the_record_names_the_checkpoints_settings_and_rate(runs, tmp_path, caps
             "top_k_ratio": 0.5,
             "temperature": 1.0,
             "residual_temperature": 0.5,
+            "schedule": "paper",
+            "noise": "per_sample",
         },
         "mask": {"path": str(last["mask"]), "sha256": gen.file_hash(last["mask"])},
         "residual": {"path": str(last["residual"]), "sha256": gen.file_hash(last["residual"])},
@@ -220,6 +222,8 @@ def test_the_defaults_are_momask_s_humanml3d_settings():
         "top_k_ratio": 0.1,
         "temperature": 1.0,
         "residual_temperature": 0.0,
+        "schedule": "paper",
+        "noise": "per_sample",
         "fps": float(hml.FPS),
     }
     settings = gen.momask_settings(gen.Request(checkpoint="run"), gen.default_settings())

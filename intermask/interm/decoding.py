@@ -325,7 +325,7 @@ def _sample(
     guided logits before top-k and temperature (as in the reference), both (B, ..., T')."""
     filtered = top_k_filter(logits, settings.top_k_ratio)
     if settings.noise == "reference" and settings.temperature > 0:
-        sampled = _reference_draw(filtered, settings.generators[0], settings.temperature)
+        sampled = reference_draw(filtered, settings.generators[0], settings.temperature)
         confidence = logits.float().softmax(-1).gather(-1, sampled[..., None])[..., 0]
         return sampled, confidence
     sampled = sample_codes(
@@ -342,7 +342,7 @@ def _remask_scores(
     iterations: int,
     active: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """The scores :func:`_remask` ranks after iteration ``iteration`` (0-based): the confidence
+    """The scores :func:`remask` ranks after iteration ``iteration`` (0-based): the confidence
     itself, or with ``settings.remask_noise`` t > 0 its log plus Gumbel noise of scale
     ``t (1 - (i + 1) / I)`` from each sample's own generator (MaskGIT's randomised re-masking:
     early iterations keep some codes other than the most confident ones; docs/learning.md,
@@ -354,7 +354,7 @@ def _remask_scores(
     return confidence.log() + scale * noise
 
 
-def _reference_draw(
+def reference_draw(
     filtered: torch.Tensor, generator: torch.Generator, temperature: float
 ) -> torch.Tensor:
     """The reference's draw: ``Categorical(softmax(filtered) / temperature).sample()`` over every
@@ -365,7 +365,7 @@ def _reference_draw(
     return torch.multinomial(flat, 1, True, generator=generator).reshape(probs.shape[:-1])
 
 
-def _remask(
+def remask(
     confidence: torch.Tensor,
     undecided: torch.Tensor,
     n_generated: torch.Tensor,
@@ -442,7 +442,7 @@ def _decode_collaborative(
         sampled, confidence = _sample(logits, settings)
         tokens = torch.where(undecided, sampled, tokens)
         scores = _remask_scores(confidence, settings, i, iterations)
-        undecided = _remask(scores, undecided, n_generated, i, iterations, settings.schedule)
+        undecided = remask(scores, undecided, n_generated, i, iterations, settings.schedule)
         tokens = tokens.masked_fill(undecided, model.vocabulary.mask_id)
     return tokens
 
@@ -478,7 +478,7 @@ def _decode_alternative(
             sampled, confidence = _sample(logits, settings, active=active)
             own = torch.where(todo, sampled, persons[person])
             scores = _remask_scores(confidence, settings, i, iterations, active)
-            pending[person] = _remask(
+            pending[person] = remask(
                 scores, todo, n_generated[:, person], i, iterations, settings.schedule
             )
             persons[person] = own.masked_fill(pending[person], model.vocabulary.mask_id)

@@ -26,7 +26,6 @@ over each sample's valid steps, so a seeded generator reproduces the result.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import partial
@@ -35,8 +34,16 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
-from intermask.interm.decoding import sample_codes, top_k_filter
-from intermask.interm.masking import cosine_schedule, lowest_ranks, scheduled_count
+from intermask.interm.decoding import (
+    NOISE,
+    NOISES,
+    SCHEDULE,
+    SCHEDULES,
+    reference_draw,
+    remask,
+    sample_codes,
+    top_k_filter,
+)
 from intermask.interm.sampler import checked_steps
 from intermask.interm.tokens import step_padding_mask
 from intermask.momask.model import MaskedTransformer, ResidualTransformer, sentence_features
@@ -158,6 +165,8 @@ def decode_base(
     top_k_ratio: float = TOP_K_RATIO,
     temperature: float = TEMPERATURE,
     generator: Generators = None,
+    schedule: str = SCHEDULE,
+    noise: str = NOISE,
 ) -> torch.Tensor:
     """Mask-predict decoding of the base layer -> (B, T') codes, -1 at steps beyond a length.
 
@@ -168,10 +177,21 @@ def decode_base(
         iterations: L forward passes.
         cfg_scale, top_k_ratio, temperature: see the module docstring; temperature 0 is greedy.
         generator: source of the sampling noise, or one generator per sample.
+        schedule: "paper" (the module docstring) or "reference": the authors' re-masking counts
+            and tie order (docs/fidelity.md row 4, shared with Inter-M's decoding).
+        noise: "per_sample" or "reference": one ``Categorical`` draw over every step of the
+            batch per pass, in order, from ``generator`` (the first, given one per sample), as
+            the authors' loop draws after ``torch.manual_seed`` (row 4b).
     """
     if iterations < 1:
         raise ValueError(f"iterations must be at least 1, got {iterations}")
+    if schedule not in SCHEDULES or noise not in NOISES:
+        raise ValueError(
+            f"schedule must be one of {SCHEDULES} and noise one of {NOISES}, got {schedule!r} "
+            f"and {noise!r}"
+        )
     _check_settings(temperature, top_k_ratio)
+    batch_generator = generator[0] if isinstance(generator, Sequence) else generator
     device = next(net.parameters()).device
     lengths_in_steps = lengths_in_steps.to(device).long()
     batch = lengths_in_steps.shape[0]
@@ -187,12 +207,14 @@ def decode_base(
         for i in range(iterations):
             run = _runner(net, (tokens, features, lengths_in_steps))
             logits = guided_logits(run, batch, text is not None, cfg_scale, device)  # (B, T', K)
-            sampled = _sample(logits, lengths_in_steps, generator, temperature, top_k_ratio)
+            if noise == "reference" and temperature > 0:
+                filtered = top_k_filter(logits, top_k_ratio)
+                sampled = reference_draw(filtered, batch_generator, temperature)
+            else:
+                sampled = _sample(logits, lengths_in_steps, generator, temperature, top_k_ratio)
             confidence = logits.float().softmax(dim=-1).gather(-1, sampled[..., None])[..., 0]
             tokens = torch.where(undecided, sampled, tokens)
-            count = scheduled_count(cosine_schedule((i + 1) / iterations), count_valid)
-            scores = confidence.masked_fill(~undecided, math.inf)
-            undecided = lowest_ranks(scores, count) & undecided
+            undecided = remask(confidence, undecided, count_valid, i, iterations, schedule)
             tokens = tokens.masked_fill(undecided, mask_id)
     return tokens.masked_fill(~valid, -1)
 
@@ -264,6 +286,8 @@ class MoMaskSampler:
         text: feature cache in front of the frozen text encoder.
         iterations, mask_cfg_scale, residual_cfg_scale, top_k_ratio, temperature,
             residual_temperature: the decoding settings (module docstring).
+        schedule, noise: the base layer's re-masking and noise (:func:`decode_base`); both
+            "reference" decode a converted release seed for seed as the authors' code does.
     """
 
     def __init__(
@@ -279,6 +303,8 @@ class MoMaskSampler:
         top_k_ratio: float = TOP_K_RATIO,
         temperature: float = TEMPERATURE,
         residual_temperature: float = RESIDUAL_TEMPERATURE,
+        schedule: str = SCHEDULE,
+        noise: str = NOISE,
     ) -> None:
         if vq.token_rows != 1:
             raise ValueError(
@@ -300,6 +326,7 @@ class MoMaskSampler:
         self.iterations, self.top_k_ratio = iterations, top_k_ratio
         self.mask_cfg_scale, self.residual_cfg_scale = mask_cfg_scale, residual_cfg_scale
         self.temperature, self.residual_temperature = temperature, residual_temperature
+        self.schedule, self.noise = schedule, noise
 
     @property
     def device(self) -> torch.device:
@@ -332,6 +359,8 @@ class MoMaskSampler:
             top_k_ratio=self.top_k_ratio,
             temperature=self.temperature,
             generator=generator,
+            schedule=self.schedule,
+            noise=self.noise,
         )
         if self.residual_net is None:
             layers = self.vq.quantizer.num_quantizers

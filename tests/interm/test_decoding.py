@@ -200,7 +200,7 @@ def test_reference_noise_is_the_references_multinomial_draw_over_the_batch(tiny)
 
     logits = torch.randn(2, 2, ROWS, STEPS, K, generator=torch.Generator().manual_seed(4))
     filtered = decoding.top_k_filter(logits, 0.5)
-    drawn = decoding._reference_draw(filtered, torch.Generator().manual_seed(9), 1.0)
+    drawn = decoding.reference_draw(filtered, torch.Generator().manual_seed(9), 1.0)
     probs = filtered.softmax(-1)
     expected = torch.multinomial(
         (probs / probs.sum(-1, keepdim=True)).reshape(-1, K), 1, True,
@@ -470,18 +470,18 @@ def test_the_reference_schedule_counts_and_ranks_as_the_reference_code():
     """Its re-masking count comes from float32 (gamma(2/3) = 0.49999997: of 3 generated tokens
     1 is re-masked where a float64 schedule re-masks 2) and its ties fall as torch's default sort
     puts them, not by position."""
-    from intermask.interm.decoding import _remask
+    from intermask.interm.decoding import remask
 
     undecided = torch.ones(1, 3, dtype=torch.bool)
     confidence = torch.tensor([[0.2, 0.1, 0.3]])
     # iteration 5 of 10 re-masks round(cos(pi/2 * 6/9) * 3) = round(1.4999999) = 1 token
-    remasked = _remask(confidence, undecided, torch.tensor([3]), 5, 10, "reference")
+    remasked = remask(confidence, undecided, torch.tensor([3]), 5, 10, "reference")
     assert remasked.tolist() == [[False, True, False]]
     assert round(math.cos(math.pi / 2 * 6 / 9) * 3) == 2  # what a float64 schedule would keep
     ties = torch.tensor([[0.5, 0.1, 0.3, 0.1, 0.9, 0.1, 0.3] * 6])
     everything = torch.ones_like(ties, dtype=torch.bool)
     # iteration 7 of 10 re-masks round(cos(pi/2 * 8/9) * 42) = 7 of the 42
     reference = ties.argsort(dim=1).argsort(dim=1) < 7  # the reference's own ranking
-    remasked = _remask(ties, everything, torch.tensor([42]), 7, 10, "reference")
+    remasked = remask(ties, everything, torch.tensor([42]), 7, 10, "reference")
     assert int(remasked.sum()) == 7 and torch.equal(remasked, reference)
     assert not torch.equal(remasked, ties.argsort(dim=1, stable=True).argsort(dim=1) < 7)

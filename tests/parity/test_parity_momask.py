@@ -12,7 +12,6 @@ The helpers below are what ``tools/parity/momask.py`` runs on our side too.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -23,11 +22,10 @@ from fixtures_io import build_state, load_fixture
 
 from intermask.convert_momask import convert_momask
 from intermask.evaluator.interclip import PositionalEncoding
-from intermask.interm.decoding import _reference_draw, top_k_filter
 from intermask.momask.load import LoadedMoMask, load_momask
 from intermask.momask.model import sentence_features
 from intermask.momask.reference import rvq_overrides, transformer_overrides
-from intermask.momask.sampler import _runner, decode_residual, guided_logits
+from intermask.momask.sampler import decode_base, decode_residual
 from intermask.release_options import UnsupportedOption
 
 FIXTURE = "momask_models"
@@ -156,42 +154,13 @@ MASK_CFG, ITERATIONS, TOP_K = 4.0, 10, 0.1  # the authors' HumanML3D decoding (e
 DECODING_SEEDS = (0, 1, 2, 3, 4)
 
 
-def _reference_remask(
-    confidence: torch.Tensor, undecided: torch.Tensor, count: torch.Tensor, i: int
-) -> torch.Tensor:
-    """The positions the authors' loop masks before pass i + 1: the ``max(1, round(gamma(t) n))``
-    least confident of those just sampled, t from their float32 ``linspace(0, 1, L)`` and the
-    product in float32 (at t = 2/3, gamma = 0.49999997: 2 of 5 steps, not the 3 a float64
-    schedule gives), ranked by torch's default sort; none after the last pass."""
-    if i == ITERATIONS - 1:
-        return torch.zeros_like(undecided)
-    ratio = torch.cos(torch.linspace(0, 1, ITERATIONS)[i + 1] * math.pi * 0.5)
-    masked = torch.round(ratio * count).clamp(min=1)
-    ranks = confidence.masked_fill(~undecided, 1e5).argsort(dim=1).argsort(dim=1)
-    return (ranks < masked[:, None]) & undecided
-
-
-@torch.no_grad()
 def reference_order_base(net, text: torch.Tensor, lengths: torch.Tensor, seed: int) -> torch.Tensor:
-    """Base-layer decoding in the authors' draw order: their schedule (:func:`_reference_remask`)
-    and one ``Categorical`` draw over the whole batch per pass, from a generator seeded as their
-    ``torch.manual_seed``. ``intermask.momask.sampler`` has no switch for it yet: this loop is its
-    ``decode_base`` with these two in place of its own schedule and per-sample noise."""
-    generator = torch.Generator().manual_seed(seed)
-    valid = valid_steps(lengths, int(lengths.max()))
-    mask_id = net.vocabulary.mask_id
-    tokens = torch.full(valid.shape, mask_id).masked_fill(~valid, -1)
-    undecided, count = valid.clone(), valid.sum(dim=1)
-    net.eval()
-    for i in range(ITERATIONS):
-        logits = guided_logits(_runner(net, (tokens, text, lengths)), len(lengths), True,
-                               MASK_CFG, torch.device("cpu"))  # fmt: skip
-        sampled = _reference_draw(top_k_filter(logits, TOP_K), generator, 1.0)
-        confidence = logits.softmax(dim=-1).gather(-1, sampled[..., None])[..., 0]
-        tokens = torch.where(undecided, sampled, tokens)
-        undecided = _reference_remask(confidence, undecided, count, i)
-        tokens = tokens.masked_fill(undecided, mask_id)
-    return tokens.masked_fill(~valid, -1)
+    """Base-layer decoding in the authors' draw order: our sampler with ``schedule=reference``
+    (their float32 counts and tie order) and ``noise=reference`` (one ``Categorical`` draw over
+    the batch per pass, from a generator seeded as their ``torch.manual_seed``)."""
+    return decode_base(net, text, lengths, iterations=ITERATIONS, cfg_scale=MASK_CFG,
+                       top_k_ratio=TOP_K, generator=torch.Generator().manual_seed(seed),
+                       schedule="reference", noise="reference")  # fmt: skip
 
 
 TOLERANCES = {"latent": DECODED, "decoded": DECODED, "mask_logits": LOGITS,
