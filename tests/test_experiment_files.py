@@ -22,6 +22,9 @@ JOBS = {
     "momask_rvq": "train_vq",
     "momask_mask": "train_gen",
     "momask_residual": "train_gen",
+    "overfit_momask_rvq": "train_vq",
+    "overfit_momask_mask": "train_gen",
+    "overfit_momask_residual": "train_gen",
 }
 # the values a user (or intermask.overfit) must give on the command line
 REQUIRED = {
@@ -38,7 +41,7 @@ def _job(experiment: str) -> str:
 
 
 def test_every_experiment_file_has_a_job():
-    assert len(EXPERIMENTS) == 35
+    assert len(EXPERIMENTS) == 39
     assert {_job(name) for name in EXPERIMENTS} == set(JOBS.values())
 
 
