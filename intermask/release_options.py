@@ -9,6 +9,8 @@ option, its value and what is supported. Training and bookkeeping options are li
 do not change the network; they are kept in the converted checkpoint's ``reference_options``).
 An option the authors' parser does not have is refused unless the user names it in
 ``ignore`` (a fork's extra logging flag, say), so nothing unknown is passed over in silence.
+The rules (:func:`mapped`, :func:`only`, :func:`heads`, ...) and :func:`overrides` serve the
+MoMask release too (:mod:`intermask.momask.reference` holds its tables).
 """
 
 from __future__ import annotations
@@ -17,25 +19,30 @@ from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 Overrides = dict[str, Any]
-_Rule = Callable[[str, Mapping[str, str]], Overrides]
+Rule = Callable[[str, Mapping[str, str]], Overrides]  # (value, all options) -> config values
 
 
 class UnsupportedOption(ValueError):
     """An ``opt.txt`` option this framework cannot build (or does not know)."""
 
 
-def _number(text: str, kind: type) -> Any:
+def number(text: str, kind: type) -> Any:
+    """An option's value as ``int`` or ``float`` (``"2.0"`` is the int 2, ``"2.5"`` no int)."""
     try:
-        return kind(float(text)) if kind is int and float(text).is_integer() else kind(text)
+        value = float(text)
     except ValueError as error:
         raise UnsupportedOption(f"not a {kind.__name__}: {text!r}") from error
+    if kind is int and not value.is_integer():
+        raise UnsupportedOption(f"not an int: {text!r}")
+    return kind(value)
 
 
-def _mapped(key: str, kind: type = int) -> _Rule:
-    return lambda value, options: {key: _number(value, kind)}
+def mapped(key: str, kind: type = int) -> Rule:
+    """An option that sets the config value ``key``."""
+    return lambda value, options: {key: number(value, kind)}
 
 
-def _only(*supported: str) -> _Rule:
+def only(*supported: str) -> Rule:
     """An option whose only value(s) here are ``supported`` (it sets nothing)."""
 
     def rule(value: str, options: Mapping[str, str]) -> Overrides:
@@ -46,52 +53,103 @@ def _only(*supported: str) -> _Rule:
     return rule
 
 
-def _same_as(other: str) -> _Rule:
+def flag(key: str) -> Rule:
+    """A True/False option that sets the boolean config value ``key``."""
+
+    def rule(value: str, options: Mapping[str, str]) -> Overrides:
+        if value not in ("True", "False"):
+            raise UnsupportedOption("not True or False")
+        return {key: value == "True"}
+
+    return rule
+
+
+def equal_to(other: str) -> Rule:
     """An option that must equal another (``code_dim`` = ``width``: ours quantizes at its width)."""
 
     def rule(value: str, options: Mapping[str, str]) -> Overrides:
-        if other in options and value != options[other]:
-            raise UnsupportedOption(f"this framework's tokenizer needs it equal to {other} "
-                                    f"({options[other]})")  # fmt: skip
+        if other in options and number(value, int) != number(options[other], int):
+            raise UnsupportedOption(
+                f"this framework's tokenizer needs it equal to {other} ({options[other]})"
+            )
         return {}
 
     return rule
 
 
-def _dilations(value: str, options: Mapping[str, str]) -> Overrides:
-    """The reference's residual stack: dilation growth**i for i < depth, in reverse order."""
-    growth = _number(value, int)
-    depth = _number(options.get("depth", "2"), int)
-    return {"model.net.encoder.dilations": [growth**i for i in range(depth)][::-1]}
+def dilations(default_depth: int) -> Rule:
+    """``dilation_growth_rate`` with ``depth``: the authors' residual stack has the dilations
+    growth**i for i < depth, in reverse order."""
+
+    def rule(value: str, options: Mapping[str, str]) -> Overrides:
+        growth = number(value, int)
+        depth = number(options.get("depth", str(default_depth)), int)
+        if growth < 1 or depth < 1:
+            raise UnsupportedOption(f"needs growth >= 1 and depth >= 1, got {growth} and {depth}")
+        return {"model.net.encoder.dilations": [growth**i for i in range(depth)][::-1]}
+
+    return rule
 
 
-def _heads(value: str, options: Mapping[str, str]) -> Overrides:
-    heads, width = _number(value, int), _number(options.get("latent_dim", "384"), int)
-    if heads < 1 or width % heads:
-        raise UnsupportedOption(f"{heads} heads do not divide latent_dim {width}")
-    return {"model.net.heads": heads}
+def heads(value: str, options: Mapping[str, str]) -> Overrides:
+    """``n_heads``, which must divide ``latent_dim``."""
+    count, width = number(value, int), number(options.get("latent_dim", "384"), int)
+    if count < 1 or width % count:
+        raise UnsupportedOption(f"{count} heads do not divide latent_dim {width}")
+    return {"model.net.heads": count}
 
 
-def _false(value: str, options: Mapping[str, str]) -> Overrides:
-    return _only("False")(value, options)
+def nothing(value: str, options: Mapping[str, str]) -> Overrides:
+    """An option read together with another one (``depth`` with ``dilation_growth_rate``)."""
+    return {}
+
+
+def overrides(
+    options: Mapping[str, str],
+    architecture: Mapping[str, Rule],
+    training: Collection[str],
+    *,
+    source: str,
+    ignore: Collection[str],
+) -> Overrides:
+    """Every option of ``options``: an architecture option through its rule, a training option
+    (or one in ``ignore``) passed over; all problems reported at once, each by name."""
+    result: Overrides = {}
+    problems = []
+    for key, value in options.items():
+        if key in architecture:
+            try:
+                result |= architecture[key](value, options)
+            except UnsupportedOption as error:
+                problems.append(f"{key}: {value} ({error})")
+        elif key not in training and key not in ignore:
+            problems.append(
+                f"{key}: {value} (not an option of the authors' code: pass --ignore-option "
+                f"{key} if it does not change the network)"
+            )
+    if problems:
+        raise UnsupportedOption(
+            f"{source}: option(s) this framework cannot build:\n  " + "\n  ".join(problems)
+        )
+    return result
 
 
 # the tokenizer (the authors' options/vq_option.py)
-VQ_ARCHITECTURE: dict[str, _Rule] = {
-    "nb_code": _mapped("model.net.quantizer.codebook_size"),
-    "width": _mapped("model.net.encoder.width"),
-    "code_dim": _same_as("width"),
-    "output_emb_width": _same_as("width"),
-    "depth": lambda value, options: {},  # with dilation_growth_rate
-    "dilation_growth_rate": _dilations,
-    "down_t": _only("2"),
-    "stride_t": _only("2"),
-    "vq_act": _only("relu"),
-    "vq_norm": _only("None"),
-    "num_quantizers": _mapped("model.net.quantizer.num_quantizers"),
-    "shared_codebook": _false,
-    "quantize_dropout_prob": _mapped("model.net.quantizer.dropout_prob", float),
-    "mu": _mapped("model.net.quantizer.decay", float),
+VQ_ARCHITECTURE: dict[str, Rule] = {
+    "nb_code": mapped("model.net.quantizer.codebook_size"),
+    "width": mapped("model.net.encoder.width"),
+    "code_dim": equal_to("width"),
+    "output_emb_width": equal_to("width"),
+    "depth": nothing,  # read with dilation_growth_rate
+    "dilation_growth_rate": dilations(default_depth=2),
+    "down_t": only("2"),
+    "stride_t": only("2"),
+    "vq_act": only("relu"),
+    "vq_norm": only("None"),
+    "num_quantizers": mapped("model.net.quantizer.num_quantizers"),
+    "shared_codebook": only("False"),
+    "quantize_dropout_prob": mapped("model.net.quantizer.dropout_prob", float),
+    "mu": mapped("model.net.quantizer.decay", float),
 }
 VQ_TRAINING = frozenset(
     "dataset_name motion_rep batch_size window_size window_stride gpu_id cache max_epoch lr "
@@ -101,15 +159,17 @@ VQ_TRAINING = frozenset(
 )
 
 # the generator (the authors' options/base_option.py and trans_option.py)
-GENERATOR_ARCHITECTURE: dict[str, _Rule] = {
-    "latent_dim": _mapped("model.net.width"),
-    "n_heads": _heads,
-    "n_layers": _mapped("model.net.depth"),
-    "ff_size": _mapped("model.net.ff"),
-    "dropout": _mapped("model.net.dropout", float),
-    "cond_drop_prob": _mapped("model.condition_drop", float),
-    "force_mask": _false,  # True: the release ignores its text
-    "gumbel_sample": _false,  # decoding: the release's default Categorical draw (fidelity 4b)
+GENERATOR_ARCHITECTURE: dict[str, Rule] = {
+    "latent_dim": mapped("model.net.width"),
+    "n_heads": heads,
+    "n_layers": mapped("model.net.depth"),
+    "ff_size": mapped("model.net.ff"),
+    "dropout": mapped("model.net.dropout", float),
+    "cond_drop_prob": mapped("model.condition_drop", float),
+    "force_mask": only("False"),  # True: the release ignores its text
+    "gumbel_sample": only(
+        "False"
+    ),  # decoding: the release's default Categorical draw (fidelity 4b)
 }
 GENERATOR_TRAINING = frozenset(
     "dataset_name motion_rep batch_size max_epoch lr step_unroll interaction_mask_prob gamma "
@@ -118,43 +178,17 @@ GENERATOR_TRAINING = frozenset(
 )
 
 
-def _overrides(
-    options: Mapping[str, str],
-    architecture: Mapping[str, _Rule],
-    training: Collection[str],
-    *,
-    source: str,
-    ignore: Collection[str],
-) -> Overrides:
-    overrides: Overrides = {}
-    problems = []
-    for key, value in options.items():
-        if key in architecture:
-            try:
-                overrides |= architecture[key](value, options)
-            except UnsupportedOption as error:
-                problems.append(f"{key}: {value} ({error})")
-        elif key not in training and key not in ignore:
-            problems.append(f"{key}: {value} (not an option of the authors' code: pass "
-                            f"--ignore-option {key} if it does not change the network)")  # fmt: skip
-    if problems:
-        raise UnsupportedOption(
-            f"{source}: option(s) this framework cannot build:\n  " + "\n  ".join(problems)
-        )
-    return overrides
-
-
 def vq_overrides(
     options: Mapping[str, str], *, source: str, ignore: Collection[str] = ()
 ) -> Overrides:
     """Config overrides (dotted keys of a ``train_vq`` config) for a tokenizer's ``opt.txt``."""
-    return _overrides(options, VQ_ARCHITECTURE, VQ_TRAINING, source=source, ignore=ignore)
+    return overrides(options, VQ_ARCHITECTURE, VQ_TRAINING, source=source, ignore=ignore)
 
 
 def generator_overrides(
     options: Mapping[str, str], *, source: str, ignore: Collection[str] = ()
 ) -> Overrides:
     """Config overrides (dotted keys of a ``train_gen`` config) for a generator's ``opt.txt``."""
-    return _overrides(
+    return overrides(
         options, GENERATOR_ARCHITECTURE, GENERATOR_TRAINING, source=source, ignore=ignore
     )

@@ -23,104 +23,48 @@ writes the run folders.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Collection, Mapping
-from typing import Any
+from collections.abc import Collection, Mapping
 
 import torch
 
-from intermask.release_options import UnsupportedOption
+from intermask.release_options import (
+    Overrides,
+    Rule,
+    dilations,
+    equal_to,
+    flag,
+    heads,
+    mapped,
+    nothing,
+    only,
+    overrides,
+)
 from intermask.utils.state_conversion import Conversion, compare_with_target
 
 # ---------------------------------------------------------------------------------------------
 # opt.txt -> config overrides
 
-Overrides = dict[str, Any]
-_Rule = Callable[[str, Mapping[str, str]], Overrides]
 DATASET = "t2m"  # HumanML3D, the dataset this framework builds MoMask for
 
-
-def _number(text: str, kind: type) -> Any:
-    try:
-        value = float(text)
-    except ValueError as error:
-        raise UnsupportedOption(f"not a {kind.__name__}: {text!r}") from error
-    if kind is int and not value.is_integer():
-        raise UnsupportedOption(f"not an int: {text!r}")
-    return kind(value)
-
-
-def _mapped(key: str, kind: type = int) -> _Rule:
-    return lambda value, options: {key: _number(value, kind)}
-
-
-def _only(*supported: str) -> _Rule:
-    def rule(value: str, options: Mapping[str, str]) -> Overrides:
-        if value not in supported:
-            raise UnsupportedOption(f"this framework builds only {' or '.join(supported)}")
-        return {}
-
-    return rule
-
-
-def _flag(key: str) -> _Rule:
-    def rule(value: str, options: Mapping[str, str]) -> Overrides:
-        if value not in ("True", "False"):
-            raise UnsupportedOption("not True or False")
-        return {key: value == "True"}
-
-    return rule
-
-
-def _equal_to(other: str) -> _Rule:
-    def rule(value: str, options: Mapping[str, str]) -> Overrides:
-        if other in options and _number(value, int) != _number(options[other], int):
-            raise UnsupportedOption(
-                f"this framework's tokenizer needs it equal to {other} ({options[other]})"
-            )
-        return {}
-
-    return rule
-
-
-def _dilations(value: str, options: Mapping[str, str]) -> Overrides:
-    """The authors' ``Resnet1D``: dilation growth**i for i < depth, in reverse order, in the
-    encoder and (also reversed) in the decoder."""
-    growth, depth = _number(value, int), _number(options.get("depth", "3"), int)
-    if growth < 1 or depth < 1:
-        raise UnsupportedOption(f"needs growth >= 1 and depth >= 1, got {growth} and {depth}")
-    return {"model.net.encoder.dilations": [growth**i for i in range(depth)][::-1]}
-
-
-def _heads(value: str, options: Mapping[str, str]) -> Overrides:
-    heads, width = _number(value, int), _number(options.get("latent_dim", "384"), int)
-    if heads < 1 or width % heads:
-        raise UnsupportedOption(f"{heads} heads do not divide latent_dim {width}")
-    return {"model.net.heads": heads}
-
-
-def _nothing(value: str, options: Mapping[str, str]) -> Overrides:
-    return {}
-
-
-_DATASET_RULE = _only(DATASET)
+_DATASET_RULE = only(DATASET)
 
 # the residual VQ-VAE (options/vq_option.py)
-RVQ_ARCHITECTURE: dict[str, _Rule] = {
+RVQ_ARCHITECTURE: dict[str, Rule] = {
     "dataset_name": _DATASET_RULE,  # 263-d HumanML3D features (kit: 251-d, not built here)
-    "nb_code": _mapped("model.net.quantizer.codebook_size"),
-    "width": _mapped("model.net.encoder.width"),
-    "code_dim": _equal_to("width"),  # ours quantizes at the encoder's width
-    "output_emb_width": _equal_to("width"),
-    "depth": _nothing,  # read with dilation_growth_rate
-    "dilation_growth_rate": _dilations,
-    "down_t": _only("2"),  # two stride-2 stages: one token per 4 frames
-    "stride_t": _only("2"),
-    "vq_act": _only("relu"),
-    "vq_norm": _only("None"),
-    "num_quantizers": _mapped("model.net.quantizer.num_quantizers"),
-    "shared_codebook": _only("False"),  # one codebook per layer
-    "quantize_dropout_prob": _mapped("model.net.quantizer.dropout_prob", float),
-    "mu": _mapped("model.net.quantizer.decay", float),
+    "nb_code": mapped("model.net.quantizer.codebook_size"),
+    "width": mapped("model.net.encoder.width"),
+    "code_dim": equal_to("width"),  # ours quantizes at the encoder's width
+    "output_emb_width": equal_to("width"),
+    "depth": nothing,  # read with dilation_growth_rate
+    "dilation_growth_rate": dilations(default_depth=3),
+    "down_t": only("2"),  # two stride-2 stages: one token per 4 frames
+    "stride_t": only("2"),
+    "vq_act": only("relu"),
+    "vq_norm": only("None"),
+    "num_quantizers": mapped("model.net.quantizer.num_quantizers"),
+    "shared_codebook": only("False"),  # one codebook per layer
+    "quantize_dropout_prob": mapped("model.net.quantizer.dropout_prob", float),
+    "mu": mapped("model.net.quantizer.decay", float),
 }
 RVQ_TRAINING = frozenset(
     "batch_size window_size gpu_id max_epoch warm_up_iter lr milestones gamma weight_decay commit "
@@ -129,17 +73,17 @@ RVQ_TRAINING = frozenset(
 )
 
 # both transformers (options/base_option.py, options/train_option.py)
-TRANSFORMER_ARCHITECTURE: dict[str, _Rule] = {
+TRANSFORMER_ARCHITECTURE: dict[str, Rule] = {
     "dataset_name": _DATASET_RULE,
-    "latent_dim": _mapped("model.net.width"),
-    "n_heads": _heads,
-    "n_layers": _mapped("model.net.depth"),
-    "ff_size": _mapped("model.net.ff"),
-    "dropout": _mapped("model.net.dropout", float),
-    "unit_length": _only("4"),  # frames per token (the tokenizer's two stride-2 stages)
-    "cond_drop_prob": _mapped("model.condition_drop", float),
-    "force_mask": _only("False"),  # True: the release ignores its text
-    "gumbel_sample": _only("False"),  # the release's decoding draws from Categorical
+    "latent_dim": mapped("model.net.width"),
+    "n_heads": heads,
+    "n_layers": mapped("model.net.depth"),
+    "ff_size": mapped("model.net.ff"),
+    "dropout": mapped("model.net.dropout", float),
+    "unit_length": only("4"),  # frames per token (the tokenizer's two stride-2 stages)
+    "cond_drop_prob": mapped("model.condition_drop", float),
+    "force_mask": only("False"),  # True: the release ignores its text
+    "gumbel_sample": only("False"),  # the release's decoding draws from Categorical
 }
 TRANSFORMER_TRAINING = frozenset(
     "name vq_name gpu_id checkpoints_dir max_motion_length batch_size max_epoch lr gamma "
@@ -147,39 +91,11 @@ TRANSFORMER_TRAINING = frozenset(
 )
 
 
-def _overrides(
-    options: Mapping[str, str],
-    architecture: Mapping[str, _Rule],
-    training: Collection[str],
-    *,
-    source: str,
-    ignore: Collection[str],
-) -> Overrides:
-    overrides: Overrides = {}
-    problems = []
-    for key, value in options.items():
-        if key in architecture:
-            try:
-                overrides |= architecture[key](value, options)
-            except UnsupportedOption as error:
-                problems.append(f"{key}: {value} ({error})")
-        elif key not in training and key not in ignore:
-            problems.append(
-                f"{key}: {value} (not an option of the authors' code: pass --ignore-option "
-                f"{key} if it does not change the network)"
-            )
-    if problems:
-        raise UnsupportedOption(
-            f"{source}: option(s) this framework cannot build:\n  " + "\n  ".join(problems)
-        )
-    return overrides
-
-
 def rvq_overrides(
     options: Mapping[str, str], *, source: str, ignore: Collection[str] = ()
 ) -> Overrides:
     """Config overrides (dotted keys of a ``train_vq`` config) for an RVQ's ``opt.txt``."""
-    return _overrides(options, RVQ_ARCHITECTURE, RVQ_TRAINING, source=source, ignore=ignore)
+    return overrides(options, RVQ_ARCHITECTURE, RVQ_TRAINING, source=source, ignore=ignore)
 
 
 def transformer_overrides(
@@ -191,10 +107,10 @@ def transformer_overrides(
     architecture = dict(TRANSFORMER_ARCHITECTURE)
     training = set(TRANSFORMER_TRAINING)
     if residual:
-        architecture["share_weight"] = _flag("model.net.share_weights")
+        architecture["share_weight"] = flag("model.net.share_weights")
     else:
         training.add("share_weight")
-    return _overrides(options, architecture, training, source=source, ignore=ignore)
+    return overrides(options, architecture, training, source=source, ignore=ignore)
 
 
 # ---------------------------------------------------------------------------------------------
