@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
-from omegaconf import OmegaConf, open_dict
+from omegaconf import DictConfig, OmegaConf, open_dict
 from torch import nn
 
 from intermask.config_files import config_dir
@@ -73,32 +73,52 @@ def read_options(checkpoint: Path) -> dict[str, str]:
     )
 
 
-def _state(checkpoint: Path, keys: tuple[str, ...], kind: str) -> dict[str, torch.Tensor]:
+def release_state(checkpoint: Path, keys: tuple[str, ...], kind: str) -> dict[str, torch.Tensor]:
+    """The state dict stored under the first of ``keys`` in a release checkpoint (weights only);
+    ``kind`` names the model in the errors ("reference VQ-VAE", "MoMask masked transformer")."""
     stored = read_checkpoint_file(checkpoint)
     for key in keys:
         if isinstance(stored, dict) and key in stored:
-            return stored[key]
+            state = stored[key]
+            if not isinstance(state, dict) or not all(
+                isinstance(v, torch.Tensor) for v in state.values()
+            ):
+                raise ValueError(f"{checkpoint}: {key} is not a state dict of tensors")
+            return state
     found = sorted(stored) if isinstance(stored, dict) else type(stored).__name__
     raise ValueError(
-        f"{checkpoint}: not a reference {kind} checkpoint (no {' or '.join(keys)}; found {found})"
+        f"{checkpoint}: not a {kind} checkpoint (no {' or '.join(keys)}; found {found})"
     )
 
 
-def _compose(job: str, overrides: list[str]):
+def composed(job: str, overrides: list[str], options: dict[str, Any]) -> DictConfig:
+    """A job's config composed with ``overrides``, then the release's mapped options applied."""
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
-        return compose(job, overrides=overrides)
+        config = compose(job, overrides=overrides)
+    with open_dict(config):
+        for key, value in options.items():
+            OmegaConf.update(config, key, value, merge=False)
+    return config
 
 
-def _checked(conversion: Conversion, checkpoint: Path, kind: str) -> Conversion:
+def checked(conversion: Conversion, checkpoint: Path, kind: str) -> Conversion:
+    """``conversion``, or a ValueError with its report when anything did not map."""
     if not conversion.complete:
         raise ValueError(
-            f"{checkpoint}: the reference {kind} does not map onto this framework's:\n"
-            + conversion.report()
+            f"{checkpoint}: the {kind} does not map onto this framework's:\n" + conversion.report()
         )
     return conversion
 
 
-def _write_run(staged: Path, folder: Path, config: Any, payload: dict[str, Any]) -> None:
+def run_payload(net: nn.Module, source: Path, options: dict[str, str], **extra: Any) -> dict:
+    """What a converted run's last.ckpt holds: the weights and where they came from."""
+    return {
+        "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()},
+        "hyper_parameters": {"converted_from": str(source), "reference_options": options, **extra},
+    }
+
+
+def write_run(staged: Path, folder: Path, config: DictConfig, payload: dict[str, Any]) -> None:
     """The run folder ``folder`` written at ``staged`` (moved into place by the caller):
     config.yaml and last.ckpt, the config naming ``folder``, where the run will live."""
     with open_dict(config):
@@ -111,15 +131,6 @@ def _write_run(staged: Path, folder: Path, config: Any, payload: dict[str, Any])
 STATISTICS = ("view.mean", "view.std", "view.has_statistics")
 
 
-def _configured(job: str, overrides: list[str], options: dict[str, Any]) -> Any:
-    """A composed job config with the release's opt.txt options applied."""
-    config = _compose(job, overrides)
-    with open_dict(config):
-        for key, value in options.items():
-            OmegaConf.update(config, key, value, merge=False)
-    return config
-
-
 def _convert_vq(
     vq: Path,
     dataset: str,
@@ -129,8 +140,8 @@ def _convert_vq(
 ) -> tuple[Any, nn.Module, str]:
     """(config, network with the release's weights, report) of the release's tokenizer."""
     mapped = vq_overrides(options, source=f"{vq.parent.parent / 'opt.txt'}", ignore=ignore)
-    config = _configured("train_vq", [f"data={dataset}", f"experiment=vq_{dataset}"], mapped)
-    reference = _state(vq, VQ_KEYS, "VQ-VAE")
+    config = composed("train_vq", [f"data={dataset}", f"experiment=vq_{dataset}"], mapped)
+    reference = release_state(vq, VQ_KEYS, "reference VQ-VAE")
     with open_dict(config):
         config.model.net.quantizer.stochastic_temperature = 0.5  # fidelity rows 6-7
         config.model.net.quantizer.reset = "reference"
@@ -149,7 +160,7 @@ def _convert_vq(
         conversion = conversion._replace(
             missing=[key for key in conversion.missing if key not in STATISTICS]
         )
-    _checked(conversion, vq, "VQ-VAE")
+    checked(conversion, vq, "reference VQ-VAE")
     net.load_state_dict({**net.state_dict(), **conversion.state})
     return config, net, conversion.report()
 
@@ -167,7 +178,7 @@ def _convert_generator(
     mapped = generator_overrides(
         options, source=f"{generator.parent.parent / 'opt.txt'}", ignore=ignore
     )
-    config = _configured(
+    config = composed(
         "train_gen",
         [f"data={dataset}", f"experiment=gen_{dataset}", f"vq_ckpt={vq_checkpoint}"],
         mapped,
@@ -178,9 +189,9 @@ def _convert_generator(
         config.model.net.token_embed_dim = code_dim
     net = instantiate(config.model.net)(codebook_size=vq_net.quantizer.codebook_size)
     conversion = convert_reference_generator(
-        _state(generator, GENERATOR_KEYS, "generator"), net.state_dict()
+        release_state(generator, GENERATOR_KEYS, "reference generator"), net.state_dict()
     )
-    _checked(conversion, generator, "generator")
+    checked(conversion, generator, "reference generator")
     net.load_state_dict(conversion.state)
     return config, net, conversion.report()
 
@@ -212,15 +223,7 @@ def convert_reference(
         )
     vq_config, vq_net, vq_report = _convert_vq(vq, dataset, vq_options, statistics, ignore_options)
     reports = {"vq": vq_report}
-    runs = {
-        "vq": (
-            vq_config,
-            {
-                "state_dict": {f"net.{k}": v for k, v in vq_net.state_dict().items()},
-                "hyper_parameters": {"converted_from": str(vq), "reference_options": vq_options},
-            },
-        )
-    }
+    runs = {"vq": (vq_config, run_payload(vq_net, vq, vq_options))}
     if generator is not None:
         generator = Path(generator)
         vq_checkpoint = out.absolute() / "vq" / "checkpoints" / "last.ckpt"  # any working folder
@@ -234,17 +237,15 @@ def convert_reference(
         )
         runs["gen"] = (
             gen_config,
-            {
-                "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()},
-                "hyper_parameters": {
-                    "codebook_size": vq_net.quantizer.codebook_size,
-                    "vq_digest": weights_digest(vq_net.eval()),
-                    "converted_from": str(generator),
-                    "reference_options": read_options(generator),
-                },
-            },
+            run_payload(
+                net,
+                generator,
+                read_options(generator),
+                codebook_size=vq_net.quantizer.codebook_size,
+                vq_digest=weights_digest(vq_net.eval()),
+            ),
         )
     with staged_outputs(out, tuple(runs)) as staged:  # both runs appear whole, or nothing does
         for name, (config, payload) in runs.items():
-            _write_run(staged / name, out.absolute() / name, config, payload)
+            write_run(staged / name, out.absolute() / name, config, payload)
     return Converted(out / "vq", out / "gen" if generator is not None else None, reports)

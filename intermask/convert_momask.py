@@ -29,17 +29,21 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
-from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf import DictConfig
 from torch import nn
 
-from intermask.config_files import config_dir
-from intermask.convert import read_options
+from intermask.convert import (
+    checked,
+    composed,
+    read_options,
+    release_state,
+    run_payload,
+    write_run,
+)
 from intermask.momask.reference import (
     DATASET,
     convert_reference_mask,
@@ -47,10 +51,8 @@ from intermask.momask.reference import (
     rvq_overrides,
     transformer_overrides,
 )
-from intermask.utils.checkpoint_files import atomic_torch_save, read_checkpoint_file
 from intermask.utils.fingerprint import weights_digest
 from intermask.utils.staging import staged_outputs
-from intermask.utils.state_conversion import Conversion
 from intermask.vq.reference import convert_reference_vq
 
 RVQ_KEYS = ("vq_model", "net")  # what the authors' loaders accept (gen_t2m.py)
@@ -81,40 +83,6 @@ def is_momask_release(vq: Path) -> bool:
     return read_options(Path(vq)).get("dataset_name") in MOMASK_DATASETS
 
 
-def _state(checkpoint: Path, keys: tuple[str, ...], kind: str) -> dict[str, torch.Tensor]:
-    stored = read_checkpoint_file(checkpoint)
-    for key in keys:
-        if isinstance(stored, dict) and key in stored:
-            state = stored[key]
-            if not isinstance(state, dict) or not all(
-                isinstance(v, torch.Tensor) for v in state.values()
-            ):
-                raise ValueError(f"{checkpoint}: {key} is not a state dict of tensors")
-            return state
-    found = sorted(stored) if isinstance(stored, dict) else type(stored).__name__
-    raise ValueError(
-        f"{checkpoint}: not a MoMask {kind} checkpoint (no {' or '.join(keys)}; found {found})"
-    )
-
-
-def _compose(job: str, overrides: list[str], options: dict[str, Any]) -> DictConfig:
-    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
-        config = compose(job, overrides=overrides)
-    with open_dict(config):
-        for key, value in options.items():
-            OmegaConf.update(config, key, value, merge=False)
-    return config
-
-
-def _checked(conversion: Conversion, checkpoint: Path, kind: str) -> Conversion:
-    if not conversion.complete:
-        raise ValueError(
-            f"{checkpoint}: the MoMask {kind} does not map onto this framework's:\n"
-            + conversion.report()
-        )
-    return conversion
-
-
 def _opt_path(checkpoint: Path) -> str:
     return str(checkpoint.parent.parent / "opt.txt")
 
@@ -137,18 +105,20 @@ def _convert_rvq(
 ) -> tuple[DictConfig, nn.Module, str, dict[str, str]]:
     options = read_options(vq)
     mapped = rvq_overrides(options, source=_opt_path(vq), ignore=ignore)
-    config = _compose(
+    config = composed(
         "train_vq",
         ["data=humanml3d", "experiment=momask_rvq"],
         {**mapped, **REFERENCE_RVQ},
     )
     net = instantiate(config.model.net)
-    conversion = convert_reference_vq(_state(vq, RVQ_KEYS, "RVQ-VAE"), net.state_dict())
+    conversion = convert_reference_vq(
+        release_state(vq, RVQ_KEYS, "MoMask RVQ-VAE"), net.state_dict()
+    )
     net.view.set_statistics(*_statistics(vq))
     conversion = conversion._replace(
         missing=[key for key in conversion.missing if key not in STATISTICS]
     )
-    _checked(conversion, vq, "RVQ-VAE")
+    checked(conversion, vq, "MoMask RVQ-VAE")
     net.load_state_dict({**net.state_dict(), **conversion.state})
     return config, net.eval(), conversion.report(), options
 
@@ -219,39 +189,24 @@ def _convert_transformer(
         overrides.append(f"text.encoder.pretrained={clip}")
     vq, width = tokenizer.net, tokenizer.code_dim
     reference = REFERENCE_RESIDUAL if residual else REFERENCE_MASK
-    config = _compose("train_gen", overrides, {**mapped, "model.net.code_dim": width, **reference})
+    config = composed("train_gen", overrides, {**mapped, "model.net.code_dim": width, **reference})
     projection = clip_text_projection(config.text)
     sizes = {"codebook_size": vq.quantizer.codebook_size, "text_dim": projection.shape[0]}
     if residual:
         sizes["num_quantizers"] = vq.quantizer.num_quantizers
     net = instantiate(config.model.net)(**sizes)
     if residual:
-        state = _state(checkpoint, RESIDUAL_KEYS, "residual transformer")
+        state = release_state(checkpoint, RESIDUAL_KEYS, "MoMask residual transformer")
         conversion = convert_reference_residual(
             state, net.state_dict(), codebook_size=sizes["codebook_size"],
             text_projection=projection,
         )  # fmt: skip
     else:
-        state = _state(checkpoint, MASK_KEYS, "masked transformer")
+        state = release_state(checkpoint, MASK_KEYS, "MoMask masked transformer")
         conversion = convert_reference_mask(state, net.state_dict(), text_projection=projection)
-    _checked(conversion, checkpoint, "residual transformer" if residual else "masked transformer")
+    checked(conversion, checkpoint, f"MoMask {'residual' if residual else 'masked'} transformer")
     net.load_state_dict(conversion.state)
     return config, net.eval(), conversion.report(), {**options, **sizes}
-
-
-def _write_run(staged: Path, folder: Path, config: DictConfig, payload: dict[str, Any]) -> None:
-    with open_dict(config):
-        config.paths.output_dir = str(folder)  # what a training run records as its folder
-    (staged / "checkpoints").mkdir(parents=True)
-    OmegaConf.save(config, staged / "config.yaml", resolve=True)
-    atomic_torch_save(payload, staged / "checkpoints" / "last.ckpt")
-
-
-def _payload(net: nn.Module, source: Path, options: dict[str, str], **extra: Any) -> dict:
-    return {
-        "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()},
-        "hyper_parameters": {"converted_from": str(source), "reference_options": options, **extra},
-    }
 
 
 def convert_momask(
@@ -282,7 +237,7 @@ def convert_momask(
     vq_config, vq_net, vq_report, vq_options = _convert_rvq(vq, ignore_options)
     reports = {"vq": vq_report}
     digest = weights_digest(vq_net)
-    runs = {"vq": (vq_config, _payload(vq_net, vq, vq_options))}
+    runs = {"vq": (vq_config, run_payload(vq_net, vq, vq_options))}
     last = out.absolute() / "vq" / "checkpoints" / "last.ckpt"
     tokenizer = _Tokenizer(vq, vq_net, int(vq_config.model.net.encoder.width), last)
     for name, checkpoint in (("mask", mask), ("residual", residual)):
@@ -300,8 +255,8 @@ def convert_momask(
         sizes = {key: options.pop(key) for key in ("codebook_size", "text_dim", "num_quantizers")
                  if key in options}  # fmt: skip
         extra = {**sizes, "vq_digest": digest}
-        runs[name] = (config, _payload(net, checkpoint, options, **extra))
+        runs[name] = (config, run_payload(net, checkpoint, options, **extra))
     with staged_outputs(out, tuple(runs)) as staged:  # every run appears whole, or none does
         for name, (config, payload) in runs.items():
-            _write_run(staged / name, out.absolute() / name, config, payload)
+            write_run(staged / name, out.absolute() / name, config, payload)
     return ConvertedMoMask({name: out / name for name in runs}, reports)

@@ -97,14 +97,16 @@ def test_a_failing_last_model_leaves_no_output(case, tmp_path):
 def test_a_write_that_fails_at_the_last_run_folder_leaves_nothing(case, tmp_path, monkeypatch):
     paths = write_release(tmp_path / "release", case["case"], case["seed"])
     monkeypatch.setenv("INTERMASK_ROOT", str(tmp_path))
-    real_save = convert_momask.atomic_torch_save
+    import intermask.convert as convert  # its write_run writes every converted run
+
+    real_save = convert.atomic_torch_save
 
     def failing_save(payload, path):
         if Path(path).parent.parent.name == "residual":
             raise OSError(28, "No space left on device")
         real_save(payload, path)
 
-    monkeypatch.setattr(convert_momask, "atomic_torch_save", failing_save)
+    monkeypatch.setattr(convert, "atomic_torch_save", failing_save)
     out = tmp_path / "out"
     with pytest.raises(OSError, match="No space left on device"):
         convert_momask.convert_momask(vq=paths["vq"], mask=paths["mask"],
