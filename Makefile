@@ -156,6 +156,7 @@ overfit-momask: install ## MoMask memorisation check: RVQ + masked + residual tr
 # The authors' checkouts for `make parity` (tools/parity/README.md); none is needed by any other target.
 REFERENCE_INTERMASK ?= ../InterMask
 REFERENCE_MOMASK ?= ../momask-codes
+REFERENCE_INTERGEN ?= ../InterGen
 PARITY_PY := .venv-parity/bin/python
 
 parity-env: ## .venv-parity: this package plus what the authors' modules import (tools/parity/README.md)
@@ -163,12 +164,12 @@ parity-env: ## .venv-parity: this package plus what the authors' modules import 
 	@uv_cmd=$$(command -v uv || echo "python3 -m uv"); $$uv_cmd venv -q --allow-existing .venv-parity \
 		&& $$uv_cmd pip install -q --python $(PARITY_PY) -e . torch_geometric positional-encodings einops tqdm matplotlib
 
-parity: ## run the parity scripts against the authors' code: make parity REFERENCE_INTERMASK=../InterMask REFERENCE_MOMASK=../momask-codes [ARGS=--write-fixture]
+parity: ## run the parity scripts against the authors' code: make parity REFERENCE_INTERMASK=../InterMask REFERENCE_MOMASK=../momask-codes REFERENCE_INTERGEN=../InterGen [ARGS=--write-fixture]
 	@test -x $(PARITY_PY) || $(MAKE) parity-env
 	$(PARITY_PY) tools/parity/intermask_models.py --reference $(REFERENCE_INTERMASK) $(ARGS)
 	$(PARITY_PY) tools/parity/momask.py --reference $(REFERENCE_MOMASK) $(ARGS)
 	$(PARITY_PY) tools/parity/evaluators.py --reference-intermask $(REFERENCE_INTERMASK) \
-		--reference-momask $(REFERENCE_MOMASK) $(ARGS)
+		--reference-momask $(REFERENCE_MOMASK) --reference-intergen $(REFERENCE_INTERGEN) $(ARGS)
 
 bench: install ## speed of the hot paths against this machine's measured peak: make bench [ARGS="--threads 1 --size demo"]
 	$(PY) -m intermask.bench $(ARGS)

@@ -60,6 +60,7 @@ SEED = 20261129
 LATENT_SCALE = 3.5  # InterCLIP's learned scale: a positive value of a trained model's size
 INTERMASK_MARKER = "models/evaluator/evaluator_interx.py"
 MOMASK_MARKER = "models/t2m_eval_wrapper.py"
+INTERGEN_MARKER = "datasets/evaluator_models.py"
 CLIP_VOCABULARY, CLIP_CONTEXT, CLIP_WIDTH = 49408, 77, 768  # ViT-L/14@336px text embeddings
 
 # ---------------------------------------------------------------------------- fixed inputs
@@ -241,14 +242,41 @@ def _tokenize(texts, context_length: int = CLIP_CONTEXT, truncate: bool = False)
     return open_clip.tokenize(texts, context_length)
 
 
-def their_interclip(checkout: Path, root: Path) -> dict[str, Any]:
+def _their_interclip_modules(origin: str) -> tuple[Any, type, Callable[[Path], Any]]:
+    """(their evaluator module, their InterCLIP, their config reader) from the checkout on
+    sys.path: InterMask's copy (models/evaluator/) or InterGen's original (datasets/)."""
+    if origin == "intergen":
+        from datasets import evaluator as their
+        from datasets.evaluator_models import InterCLIP
+
+        def read(path: Path) -> Any:  # their configs.get_config needs yacs; the same keys
+            return Namespace(**{k: _yaml_value(v) for k, v in (
+                line.split(": ", 1) for line in path.read_text().splitlines() if line)})  # fmt: skip
+
+        return their, InterCLIP, read
+    _stub_plot_script()
+    from models.evaluator import evaluator as their
+    from models.evaluator.evaluator_models import InterCLIP
+    from utils.get_opt import get_opt
+
+    return their, InterCLIP, lambda path: get_opt(str(path), "cpu", complete=False)
+
+
+def _yaml_value(text: str) -> Any:
+    for kind in (int, float):
+        with contextlib.suppress(ValueError):
+            return kind(text)
+    return {"True": True, "False": False}.get(text, text)
+
+
+def their_interclip(checkout: Path, root: Path, origin: str = "intermask") -> dict[str, Any]:
+    """InterCLIP and its wrapper from a checkout of InterMask (``origin="intermask"``) or of
+    InterGen, whose evaluator InterMask copied (``origin="intergen"``, the same release file)."""
     inputs = interhuman_inputs()
-    with common.reference_modules(checkout, INTERMASK_MARKER):
-        _stub_plot_script()
+    marker = INTERGEN_MARKER if origin == "intergen" else INTERMASK_MARKER
+    with common.reference_modules(checkout, marker):
         common.clip_stub(_ClipStub(), _tokenize)
-        from models.evaluator import evaluator as their
-        from models.evaluator.evaluator_models import InterCLIP
-        from utils.get_opt import get_opt
+        their, InterCLIP, get_config = _their_interclip_modules(origin)  # noqa: N806
 
         config = INTERCLIP_FILE.rsplit("/", 1)[0] + "/eval_model.yaml"
         yaml = (
@@ -258,7 +286,7 @@ def their_interclip(checkout: Path, root: Path) -> dict[str, Any]:
         )  # fmt: skip  (InterGen's eval_model.yaml)
         (root / config).parent.mkdir(parents=True, exist_ok=True)
         (root / config).write_text(yaml)
-        cfg = get_opt(str(root / config), "cpu", complete=False)
+        cfg = get_config(root / config)
         model = InterCLIP(cfg)
         state = model.state_dict()
         recipe = common.weight_recipe(state)
@@ -279,7 +307,8 @@ def their_interclip(checkout: Path, root: Path) -> dict[str, Any]:
         fixture = {"case": "interclip", "seed": SEED, "recipe": recipe, "extras": extras,
                    "text_files": {config: yaml}, "inputs": inputs}  # fmt: skip
         write_release(root, fixture)
-        with contextlib.chdir(root):  # their build_models reads checkpoints/eval_model/...
+        # their build_models reads checkpoints/eval_model/... (InterMask) or eval_model/...
+        with contextlib.chdir(root / "checkpoints" if origin == "intergen" else root):
             wrapper = their.EvaluatorModelWrapper(cfg, "cpu")
         raw = inputs["raw"].double().numpy()
         items = []
@@ -548,6 +577,12 @@ def main() -> int:
         help=f"a checkout of EricGuo5513/momask-codes (it holds {MOMASK_MARKER})",
     )
     cli.add_argument(
+        "--reference-intergen",
+        type=Path,
+        help="also InterCLIP from a checkout of tr3e/InterGen, where InterMask's copy comes "
+        f"from (it holds {INTERGEN_MARKER}); printed, no fixture",
+    )
+    cli.add_argument(
         "--write-fixture",
         action="store_true",
         help="also (re)write tests/parity/fixtures/evaluator_<case>.pt",
@@ -572,6 +607,12 @@ def main() -> int:
             path = common.save_fixture(f"evaluator_{case}", fixture)
             print(f"wrote {path.relative_to(common.REPO)} ({path.stat().st_size} bytes)")
         del fixture
+    if args.reference_intergen is not None:
+        print("InterCLIP from InterGen (the original of InterMask's copy):")
+        with tempfile.TemporaryDirectory() as theirs, tempfile.TemporaryDirectory() as ours:
+            fixture = their_interclip(args.reference_intergen.resolve(), Path(theirs), "intergen")
+            fixture["reference_commit"] = _commit(args.reference_intergen)
+            worst = max(worst, *report(fixture, Path(ours)).values())
     return 0 if worst <= TOLERANCE else 1
 
 
