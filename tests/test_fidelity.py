@@ -62,8 +62,15 @@ def test_the_reference_eval_preset_decodes_as_the_reference():
     reference = _compose("eval", "eval_ckpt=x.ckpt", "experiment=eval_reference")
     assert (reference.sampler.schedule, reference.sampler.noise) == ("reference", "reference")
     assert reference.reaction.iterations == 10
+    momask = reference.momask
+    assert (momask.schedule, momask.noise, momask.residual_temperature) == (
+        "reference",
+        "reference",
+        1.0,
+    )
     reference.sampler.schedule, reference.sampler.noise = "paper", "per_sample"
     reference.reaction.iterations = 12
+    momask.schedule, momask.noise, momask.residual_temperature = "paper", "per_sample", 0.0
     assert reference == paper
 
 

@@ -112,7 +112,8 @@ def test_paper_configurations_compose():
     assert interhuman.callbacks.model_checkpoint.monitor == "val/top3"
     gru = interx.model.net
     assert gru._target_.endswith("GRUMatcher") and interx.model.loss == "margin"
-    assert (gru.word_dim, gru.motion_hidden, gru.text_hidden, gru.max_words) == (300, 1024, 512, 20)
+    # 35 caption tokens: what InterMask's eval.py gives its Inter-X matcher (T2M keeps 20)
+    assert (gru.word_dim, gru.motion_hidden, gru.text_hidden, gru.max_words) == (300, 1024, 512, 35)
     assert interx.model.retrieval_group_size == 32 and interx.data.batch_size == 32
     assert (
         demo.text.encoder.model_name == "intermask-tiny-text" and demo.data.dataset == "interhuman"
