@@ -398,6 +398,11 @@ def build_parser() -> argparse.ArgumentParser:
     success.set_defaults(run=_data_success_stats)
 
     _add_generate_parser(commands)
+    _add_convert_parser(commands)
+    return parser
+
+
+def _add_convert_parser(commands) -> None:
     convert = commands.add_parser(
         "convert-reference",
         help="the authors' released checkpoints -> run folders of this framework",
@@ -432,7 +437,6 @@ def build_parser() -> argparse.ArgumentParser:
         "network (repeat); any other unknown option is refused",
     )
     convert.set_defaults(run=_convert_reference)
-    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
