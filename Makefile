@@ -170,6 +170,7 @@ parity: ## run the parity scripts against the authors' code: make parity REFEREN
 	$(PARITY_PY) tools/parity/momask.py --reference $(REFERENCE_MOMASK) $(ARGS)
 	$(PARITY_PY) tools/parity/evaluators.py --reference-intermask $(REFERENCE_INTERMASK) \
 		--reference-momask $(REFERENCE_MOMASK) --reference-intergen $(REFERENCE_INTERGEN) $(ARGS)
+	$(PARITY_PY) tools/parity/eval_loop.py --reference $(REFERENCE_INTERMASK)
 
 bench: install ## speed of the hot paths against this machine's measured peak: make bench [ARGS="--threads 1 --size demo"]
 	$(PY) -m intermask.bench $(ARGS)
