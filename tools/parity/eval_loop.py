@@ -454,7 +454,9 @@ def main() -> int:
         "--clips", type=int, default=100, help="test clips (>= 97: eval.py batches 96)"
     )
     cli.add_argument("--replications", type=int, default=2)
-    cli.add_argument("--time-steps", type=int, default=20, help="eval.py --time_steps (decoding)")
+    cli.add_argument(
+        "--time-steps", type=int, default=10, help="eval.py --time_steps (its default: 20)"
+    )
     cli.add_argument("--mm-texts", type=int, default=3, help="eval.py --mm_num_samples")
     cli.add_argument("--mm-generations", type=int, default=6, help="--mm_num_repeats")
     cli.add_argument("--mm-pairs", type=int, default=5, help="--mm_num_times")
