@@ -167,9 +167,8 @@ GENERATOR_ARCHITECTURE: dict[str, Rule] = {
     "dropout": mapped("model.net.dropout", float),
     "cond_drop_prob": mapped("model.condition_drop", float),
     "force_mask": only("False"),  # True: the release ignores its text
-    "gumbel_sample": only(
-        "False"
-    ),  # decoding: the release's default Categorical draw (fidelity 4b)
+    # decoding: the release's default Categorical draw (fidelity 4b)
+    "gumbel_sample": only("False"),
 }
 GENERATOR_TRAINING = frozenset(
     "dataset_name motion_rep batch_size max_epoch lr step_unroll interaction_mask_prob gamma "
