@@ -33,6 +33,7 @@ from intermask.interm.reference import convert_reference_generator
 from intermask.release_options import generator_overrides, vq_overrides
 from intermask.utils.checkpoint_files import atomic_torch_save, read_checkpoint_file
 from intermask.utils.fingerprint import weights_digest
+from intermask.utils.run_record import write_run_record
 from intermask.utils.staging import staged_outputs
 from intermask.utils.state_conversion import Conversion
 from intermask.vq.reference import convert_reference_vq, has_graph_ends
@@ -125,6 +126,7 @@ def write_run(staged: Path, folder: Path, config: DictConfig, payload: dict[str,
         config.paths.output_dir = str(folder)  # what a training run records as its folder
     (staged / "checkpoints").mkdir(parents=True)
     OmegaConf.save(config, staged / "config.yaml", resolve=True)
+    write_run_record(staged, extra={"job": "convert-reference"}, folder=folder)
     atomic_torch_save(payload, staged / "checkpoints" / "last.ckpt")
 
 

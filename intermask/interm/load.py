@@ -80,7 +80,8 @@ def open_generator_run(
     checkpoint: str | Path, *, vq_checkpoint: str | Path | None, map_location: str
 ) -> GeneratorRun:
     """Open a train_gen run's checkpoint and config; check its network and text targets and
-    that its tokenizer file exists (the run's ``vq_ckpt`` unless ``vq_checkpoint``)."""
+    that its tokenizer file exists: ``vq_checkpoint``, else the run's ``vq_ckpt``, found from
+    the run folder wherever the tree was moved (:mod:`intermask.utils.run_location`)."""
     run = open_run_checkpoint(checkpoint, kind="generator", map_location=map_location)
     config, config_path = run.config, run.config_path
     if "vq_ckpt" not in config or "net" not in config.get("model", {}):
@@ -88,12 +89,20 @@ def open_generator_run(
     # both sections are checked before anything is built or read
     net_config = check_targets(config.model.net, source=config_path, section="model.net")
     text_config = check_targets(config.text, source=config_path, section="text")
-    vq_path = Path(vq_checkpoint or config.vq_ckpt)
-    if not vq_path.is_file():
-        raise FileNotFoundError(
-            f"{vq_path}: the generator's VQ checkpoint (from {config_path}) is missing; pass "
-            "vq_checkpoint= to point to it"
-        )
+    text_config = run.location.relocated(text_config)
+    if vq_checkpoint is not None:
+        vq_path = Path(vq_checkpoint)
+        if not vq_path.is_file():
+            raise FileNotFoundError(
+                f"{vq_path}: the VQ checkpoint given for {run.checkpoint} is missing"
+            )
+    else:
+        try:
+            vq_path = run.location.locate(
+                config.vq_ckpt, what="the generator's VQ checkpoint", source=config_path
+            )
+        except FileNotFoundError as error:
+            raise FileNotFoundError(f"{error}; pass vq_checkpoint= to point to it") from None
     hyper_parameters = run.stored.get("hyper_parameters", {})
     return GeneratorRun(run, net_config, text_config, vq_path, hyper_parameters)
 

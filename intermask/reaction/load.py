@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hydra.utils import instantiate
+
 from intermask.reaction.module import ARFlowModule
 from intermask.utils.files import open_run_checkpoint
-from intermask.utils.run_config import instantiate_from_run
+from intermask.utils.run_config import check_targets
 
 
 def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowModule:
@@ -22,8 +24,7 @@ def load_arflow(checkpoint: str | Path, *, map_location: str = "cpu") -> ARFlowM
         raise ValueError(
             f"{run.config_path}: not a train_arflow run config (model is not ARFlowModule)"
         )
-    module: ARFlowModule = instantiate_from_run(
-        model_config, source=run.config_path, section="model"
-    )
+    checked = check_targets(model_config, source=run.config_path, section="model")
+    module: ARFlowModule = instantiate(run.location.relocated(checked))
     module.load_state_dict(run.weights())
     return module.eval().requires_grad_(False)

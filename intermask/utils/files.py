@@ -12,6 +12,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from intermask.utils.checkpoint_files import read_checkpoint_file
+from intermask.utils.run_location import RunLocation
 
 HASH_CHARS = 16
 
@@ -53,6 +54,11 @@ class RunCheckpoint:
     config_path: Path  # <run>/config.yaml
     config: DictConfig
     map_location: str = "cpu"
+
+    @cached_property
+    def location(self) -> RunLocation:
+        """The run folder now and where it was: finds what the run depends on after a move."""
+        return RunLocation.of(self.checkpoint.parent.parent, self.config)
 
     @cached_property
     def stored(self) -> dict[str, Any]:

@@ -7,6 +7,7 @@ versions produced it, so every job calls :func:`write_run_record` before doing w
 from __future__ import annotations
 
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -66,8 +67,13 @@ def write_run_record(
     output_dir: Path | str,
     config: DictConfig | dict[str, Any] | None = None,
     extra: dict[str, Any] | None = None,
+    *,
+    folder: Path | str | None = None,
 ) -> Path:
-    """Write ``config.yaml`` (resolved) and ``run_record.json`` into ``output_dir``; return the json path."""
+    """Write ``config.yaml`` (resolved) and ``run_record.json`` into ``output_dir``; return the
+    json path. The record names the working directory and the run folder (``folder``, where the
+    run will live when it is written into a staging folder first): what lets a moved run find
+    its dependencies (:mod:`intermask.utils.run_location`)."""
     output_dir = Path(output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     if config is not None:
@@ -77,6 +83,8 @@ def write_run_record(
     record = {
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "command": sys.argv,
+        "cwd": os.getcwd(),
+        "output_dir": os.path.abspath(folder or output_dir),
         "git_revision": git_revision(),
         "python": sys.version.split()[0],
         "platform": platform.platform(),
