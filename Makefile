@@ -34,7 +34,8 @@ $(STAMP): pyproject.toml uv.lock
 		|| python3 -m pip install --quiet "uv==$(UV_VERSION)"
 	@# --compile-bytecode: byte-compile the environment once (~30 s on 2 cores). Where Python may
 	@# not write .pyc files (PYTHONDONTWRITEBYTECODE, read-only trees), every process would compile
-	@# torch and Lightning again: `import intermask.train` 23.7 s without, 9.2 s with (docs/learning.md).
+	@# torch and Lightning again: `import intermask.train` 23.7 s without, 9.2 s with
+	@# (docs/decisions.md: make install).
 	@uv_cmd=$$(command -v uv || echo "python3 -m uv"); $$uv_cmd sync --frozen --compile-bytecode
 	@touch $@
 
@@ -105,7 +106,7 @@ eval: install ## the 20-replication protocol: make eval [GEN_CKPT=run] [EVAL_CKP
 DEMO_DIR ?= outputs/demo
 # Captions in the dataset's own phrasing: the demo's text tower is random, so a caption worded
 # unlike the training captions ("two people shake hands") is an unseen input, and its samples
-# put both persons on one spot (docs/learning.md, ninth pass).
+# put both persons on one spot (docs/decisions.md: DEMO_PROMPTS).
 DEMO_PROMPTS := --text "One person reaches out their right hand and the other person shakes it." \
 	--text "With both hands, someone pushes another person, who stumbles back."
 # the table's decoding (configs/experiment/eval_demo.yaml), at the length gen_demo trains on (96

@@ -127,7 +127,7 @@ def test_the_papers_optimizer_is_adamw_and_the_cpu_demos_generator_takes_muon():
     assert demo._target_ == "intermask.utils.optim.Muon"
     assert (demo.lr, list(demo.betas)) == (2.0e-3, [0.9, 0.99])  # Muon's momentum: 0.95
     for experiment in ("overfit_gen", "gen_synthetic_long", "gen_synthetic_long_cpu"):
-        # built on gen_demo, measured with AdamW (docs/learning.md)
+        # built on gen_demo, measured with AdamW (docs/decisions.md: model.optimizer)
         cfg = _compose("train_gen", f"experiment={experiment}", "vq_ckpt=x.ckpt")
         assert cfg.model.optimizer._target_ == "torch.optim.AdamW", experiment
     for experiment in ("overfit_gen", "gen_synthetic_long_cpu"):  # and at width 128, not 64
@@ -146,9 +146,11 @@ def test_the_pelvis_relative_vq_losses_are_the_demos_not_the_papers():
         w = weights[experiment]
         assert (w.arms, w.torso, w.legs) == (0.0, 0.0, 0.0), experiment
     assert (weights["vq_demo"].arms, weights["vq_demo"].torso) == (20.0, 20.0)
-    # measured on two tokenizer seeds, not yet on a whole demo (docs/learning.md, 28th pass)
+    # measured on paired tokenizer seeds, not on a whole demo
+    # (docs/decisions.md: model.loss_weights.legs)
     assert weights["vq_demo"].legs == 0.0
-    # the memorisation check's 14 of 14 were measured before the torso term (docs/learning.md)
+    # the memorisation check's 14 of 14 were measured before the torso term
+    # (docs/decisions.md: model.loss_weights.torso)
     assert (weights["overfit_vq"].arms, weights["overfit_vq"].torso) == (20.0, 0.0)
     table = Path(CONFIG_DIR).parent.joinpath("docs", "fidelity.md").read_text()
     for name in ("arms", "torso", "legs"):

@@ -64,7 +64,8 @@ def test_report_table_counts_successes_and_flags_failures():
 
 @pytest.mark.slow
 def test_the_chain_memorises_fourteen_clips(tmp_path):
-    """14 of 14 since the arms loss (docs/learning.md, ninth pass: 28 min at one thread)."""
+    """14 of 14 since the arms loss (docs/decisions.md: model.loss_weights.arms); 28 min at one
+    thread when first measured."""
     from intermask.overfit import DEFAULT_ACCURACY, run
 
     report = run(tmp_path / "overfit", seed=0)

@@ -45,9 +45,9 @@ def test_generate_and_eval_compose_the_library_defaults():
         paper = compose("eval", overrides=["eval_ckpt=x.ckpt"])
         demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
     assert dict(paper.sampler) == LIBRARY
-    # the demo's changes: persons in turn, 5 iterations each, a weaker guidance (docs/learning.md,
-    # ninth pass), two revisits (A given B, then B given the new A: eleventh and 24th passes) and
-    # randomised re-masking (24th pass)
+    # the demo's changes (docs/decisions.md: sampler.persons, sampler.cfg_scale, sampler.revisits,
+    # sampler.remask_noise): persons in turn, 5 iterations each, a weaker guidance, two revisits
+    # (A given B, then B given the new A) and randomised re-masking
     assert dict(demo.sampler) == {
         **LIBRARY,
         "iterations": 5,

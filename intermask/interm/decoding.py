@@ -18,8 +18,8 @@ persons one after the other: person A's ``I`` iterations with person B all [MASK
 permutation-equivariant, so from an all-[MASK] start both persons get the same prediction; when
 the two roles of an interaction differ, tokens committed in the same iteration can take one
 role in one person and the other role in the other, or the same role in both (both persons at the
-actor's place). Decoding A first commits one role before B is drawn (docs/learning.md, seventh
-pass).
+actor's place). Decoding A first commits one role before B is drawn (docs/decisions.md:
+sampler.persons).
 
 Interaction generation generates everything; reaction generation fixes person A's tokens
 (appendix G, "the reference tokens remain unmasked throughout"); inpainting (MoMask) fixes every
@@ -174,8 +174,8 @@ def partner_guided_logits(
 
     The model knows both predictions: interaction masking trains a person beside its visible
     partner, solo masking beside a wholly masked one. Their difference is what the partner adds,
-    and ``g > 0`` follows it further, as text guidance follows the text (docs/learning.md,
-    thirteenth pass). Without a condition, ``cond`` is the null prediction. ``forward`` as in
+    and ``g > 0`` follows it further, as text guidance follows the text (docs/decisions.md:
+    sampler.partner_scale). Without a condition, ``cond`` is the null prediction. ``forward`` as in
     :func:`guided_logits`.
     """
     forward = forward or model.forward_with_condition
@@ -345,8 +345,8 @@ def _remask_scores(
     """The scores :func:`remask` ranks after iteration ``iteration`` (0-based): the confidence
     itself, or with ``settings.remask_noise`` t > 0 its log plus Gumbel noise of scale
     ``t (1 - (i + 1) / I)`` from each sample's own generator (MaskGIT's randomised re-masking:
-    early iterations keep some codes other than the most confident ones; docs/learning.md,
-    twenty-fourth pass)."""
+    early iterations keep some codes other than the most confident ones; docs/decisions.md:
+    sampler.remask_noise)."""
     scale = settings.remask_noise * (1 - (iteration + 1) / iterations)
     if scale == 0:
         return confidence
@@ -538,7 +538,7 @@ def generate(
         revisits: with ``persons="in_turn"``, this many more turns after B's: person A's
             generated tokens are all [MASK]ed and decoded again given B's finished tokens, then
             B's given the new A, alternating (``iterations`` passes each). The first turn of A
-            saw no B; a revisit sees it (docs/learning.md, tenth pass). 0 is plain in-turn
+            saw no B; a revisit sees it (docs/decisions.md: sampler.revisits). 0 is plain in-turn
             decoding.
         partner_scale: g of partner guidance (:func:`partner_guided_logits`), for passes that
             decode one person beside the other's fixed tokens: in-turn decoding's turns after

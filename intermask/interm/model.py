@@ -93,7 +93,8 @@ class InterMTransformer(nn.Module):
         code_dim: None (the paper: a code enters only through its learned embedding) or the
             width of the VQ-VAE's code vectors: each motion code's input then also carries its
             codebook vector, through a learned projection (:meth:`set_code_vectors`;
-            docs/learning.md, twelfth pass). The vectors are a buffer, saved with the weights.
+            docs/decisions.md: model.code_vectors). The vectors are a buffer, saved with the
+            weights.
         modeling: ``"collaborative"`` (section 3.2) or ``"alternative"`` (appendix E, Table 3).
             Alternative modeling builds the same layers (same parameter count) but updates only
             the predicted person's embeddings in the blocks; the other person's input

@@ -144,7 +144,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
             (:mod:`intermask.interm.token_cache`), emptied when the VQ changes.
         code_vectors: each motion code's input also carries the VQ's codebook vector for it,
             through a learned projection (``InterMTransformer(code_dim=...)``, built here with
-            the VQ's code width); off in the paper (docs/learning.md, twelfth pass).
+            the VQ's code width); off in the paper (docs/decisions.md: model.code_vectors).
     """
 
     def __init__(

@@ -13,8 +13,8 @@ Embeddings and output layers (whose rows are looked up or scored one by one, not
 norms and every other parameter that is not a 2D matrix take AdamW steps in the same optimizer:
 a parameter group's ``muon`` key picks the rule (:func:`muon_groups` builds the two groups).
 
-Measured on the CPU demo's Inter-M (docs/learning.md, sixteenth pass): validation masked accuracy
-0.614 after 600 steps against AdamW's 0.469 (AdamW reaches 0.612 after 1,800).
+Measured on the CPU demo's Inter-M (docs/decisions.md: model.optimizer): validation masked
+accuracy 0.614 after 600 steps against AdamW's 0.469 (AdamW reaches 0.612 after 1,800).
 """
 
 from __future__ import annotations

@@ -66,7 +66,7 @@ class EMAQuantizer(nn.Module):
             global batch), the next dead code from the next worst, and so on: the latents a
             rare pose leaves far from every code get codes of their own instead of random
             ones. On the demo it lowered the tokenizer's and its generators' FID
-            (docs/learning.md, thirtieth pass).
+            (docs/decisions.md: model.net.quantizer.reset).
     """
 
     def __init__(

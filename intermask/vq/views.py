@@ -82,9 +82,9 @@ class InterHumanView(NormalizedView):
     free for the pose: in the shared frame every joint's code must also say where the person
     stands. On the CPU demo's tokenizer (two seeds) it raised reconstruction success from 39.5%
     to 45.5% on average and lowered MPJPE, FID and the wrists' error on both seeds
-    (docs/learning.md, fourth pass). The map is linear and exactly inverted by
-    :meth:`from_joints`, so the features, the losses and the decoded motion keep the dataset's
-    frame.
+    (docs/decisions.md: model.net.view.relative_positions). The map is linear and exactly
+    inverted by :meth:`from_joints`, so the features, the losses and the decoded motion keep the
+    dataset's frame.
     """
 
     num_joints = NUM_JOINTS

@@ -84,7 +84,8 @@ def test_long_synthetic_run_is_the_paper_network_scored_by_the_protocol():
 def test_long_cpu_run_is_the_demo_network_trained_longer_and_scored_every_1000_steps():
     cfg = _compose("gen_synthetic_long_cpu", "callbacks.protocol.evaluator=unused.ckpt")
     demo = _compose("gen_demo")
-    # at the width its curve was measured with (docs/learning.md), the demo's otherwise
+    # at the width its curve was measured with (docs/decisions.md: model.net.width), the demo's
+    # otherwise
     widths = {"width": 128, "ff": 256, "token_embed_dim": 128}
     assert {key: cfg.model.net[key] for key in widths} == widths
     assert demo.model.net.width == 64
@@ -103,9 +104,10 @@ def test_demo_setting_keeps_the_paper_switches_on_a_cpu_sized_network():
     cfg = _compose("gen_demo")
     landed = {key: cfg.model[key] if key in cfg.model else cfg.model.net[key] for key in PAPER}
     # the demo trains without the step-unroll pass: at its CPU budget the measured run without it
-    # had the better top-3 and success (docs/learning.md); every other paper switch stays on
+    # had the better top-3 and success (docs/decisions.md: model.step_unroll); every other paper
+    # switch stays on
     # and it trains for the persons-in-turn decoding of eval_demo: a quarter of the samples
-    # masked solo, a quarter by interaction masking (docs/learning.md, seventh pass)
+    # masked solo, a quarter by interaction masking (docs/decisions.md: model.p_solo)
     assert landed == {**PAPER, "step_unroll": False, "p_random": 0.5, "p_solo": 0.5}
     assert cfg.trainer.accelerator == "cpu" and cfg.text.encoder.pretrained is None
     assert cfg.model.net.text_dim == 64  # the tiny text tower

@@ -89,7 +89,7 @@ def _train_config(overrides: list[str]):
     [
         ("train_vq", "vq_demo", "auto"),
         # on a CPU with native bf16 the demo's two small transformers are slower in bf16 than in
-        # fp32, and the tokenizer's convolutions faster (docs/learning.md, 25th pass)
+        # fp32, and the tokenizer's convolutions faster (docs/decisions.md: trainer.precision)
         ("train_evaluator", "evaluator_demo", "32-true"),
         ("train_gen", "gen_demo", "32-true"),
         ("train_arflow", "arflow_demo", "auto"),
