@@ -51,6 +51,7 @@ from intermask.interm.sampler import InteractionSampler
 from intermask.momask.load import load_momask_sampler
 from intermask.momask.sampler import MoMaskSampler
 from intermask.motion import humanml3d as hml
+from intermask.motion import interhuman
 from intermask.utils.files import file_hash, open_run_checkpoint
 from intermask.utils.precision import FP32, OPTIONS, resolve_precision
 from intermask.vq.model import FRAMES_PER_STEP
@@ -98,7 +99,7 @@ class Settings:
     partner_scale: float = PARTNER_SCALE
     remask_noise: float = REMASK_NOISE
     batch_size: int = 32
-    fps: float = 30.0
+    fps: float = float(interhuman.FPS)
     precision: str = FP32  # or bf16-mixed: the decoding under bf16 autocast
 
 

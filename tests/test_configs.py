@@ -115,3 +115,27 @@ def test_vq_ablations_are_config_selections(experiment, persons, rows):
     features = torch.randn(1, 16, 2, 262) if persons == 2 else torch.randn(1, 16, 262)
     assert net.train()(features).indices.shape == (1, 1, rows, 4)
     assert cfg.data.get("window_persons", 1) == persons
+
+
+def test_decoding_defaults_shared_by_generate_and_eval_say_the_same():
+    """Facts stated in two job configs (and MoMask's in its sampler's defaults) must agree:
+    a reaction decodes in the paper's 12 iterations (appendix C) whether generated or
+    evaluated, and MoMask decodes with section 4's settings in both jobs."""
+    import inspect
+
+    from intermask.evaluation.sources import InterMaskReaction
+    from intermask.momask.sampler import MoMaskSampler
+
+    generate, evaluate = _compose("generate", []), _compose("eval", [])
+    assert generate.reaction_iterations == evaluate.reaction.iterations == 12
+    # the evaluation source has no default of its own: the config is the one owner
+    iterations = inspect.signature(InterMaskReaction).parameters["iterations"]
+    assert iterations.default is inspect.Parameter.empty
+    momask = {k: v for k, v in generate.momask.items() if k != "fps"}
+    assert momask == dict(evaluate.momask)
+    sampler_defaults = {
+        name: p.default
+        for name, p in inspect.signature(MoMaskSampler).parameters.items()
+        if p.default is not inspect.Parameter.empty
+    }
+    assert sampler_defaults == momask

@@ -43,11 +43,12 @@ FID_REFERENCES = ("separate_pass", "same_pass")
 
 @dataclass(frozen=True)
 class ProtocolConstants:
-    """Defaults: InterHuman (docs/evaluation.md, "Constants")."""
+    """Defaults: InterHuman's, as ``configs/protocol/interhuman.yaml`` states them with their
+    sources (docs/evaluation.md, "Constants"); a test keeps the two equal."""
 
     eval_batch_size: int = 96  # R-precision / MM Dist grouping (Inter-X: 32)
     replications: int = 20
-    mm_replications: int = 20  # the InterMask paper uses 5 on both datasets (configs/protocol)
+    mm_replications: int = 5  # the InterMask paper: 5 on both datasets
     emb_scale: float = 6.0  # FID and Diversity embeddings x emb_scale (Inter-X: 1)
     divide_by: float = 2.0  # Diversity / divide_by (Inter-X: 1)
     mm_scale: float = 3.0  # InterMask's 6 / 2 on InterHuman; InterGen and Inter-X: 1

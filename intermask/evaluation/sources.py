@@ -80,7 +80,7 @@ class InterMaskReaction(MotionSource):
         *,
         sampler: InteractionSampler,
         normalizer: Normalizer | None,
-        iterations: int = 10,  # the reference's reaction setting (the paper states 12)
+        iterations: int,  # configs/eval.yaml reaction.iterations (the paper's 12)
         use_text: bool = True,
         name: str = "InterMask (reaction)",
     ) -> None:

@@ -27,15 +27,10 @@ from intermask.interm.attention import MultiHeadAttention
 from intermask.interm.blocks import AdaLNModulation, InterMBlock, adaptive_norm, modulate
 from intermask.interm.position import add_grid_encoding
 from intermask.interm.tokens import Vocabulary, build_sequence, sequence_padding_mask, split_persons
+from intermask.text.clip_encoder import TextFeatures
 from intermask.utils.layers import post_norm_gelu_encoder
 
 MODELINGS = ("collaborative", "alternative")  # Table 3: ours vs the appendix E ablation
-
-
-class TextFeatures(NamedTuple):
-    features: torch.Tensor  # (B, L, 768) frozen CLIP per-token features (after ln_final)
-    eot_index: torch.Tensor  # (B,) int64 position of the end-of-text token
-    padding_mask: torch.Tensor | None = None  # (B, L) True at padding; None = attend to all L
 
 
 class InterMOutput(NamedTuple):

@@ -32,6 +32,7 @@ from intermask.interm.sampler import (
     joints_from_features,
 )
 from intermask.interm.token_cache import FrozenTokenizerHooks, TokenCache, crop_keys
+from intermask.motion import interhuman
 from intermask.motion.masks import length_mask
 from intermask.motion.statistics import interaction_statistics
 from intermask.text.cache import TextFeatureCache
@@ -166,7 +167,7 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         lr_final: float = 0.0,
         validation_samples: int = 4,
         sample_iterations: int = 10,
-        fps: float = 30.0,
+        fps: float = float(interhuman.FPS),
         token_cache: bool = True,
         code_vectors: bool = False,
     ) -> None:

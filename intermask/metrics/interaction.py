@@ -23,7 +23,8 @@ from typing import NamedTuple
 import torch
 
 # action id = position; the synthetic dataset that writes the labels owns the list
-from intermask.data.synthetic.clips import ACTIONS
+from intermask.motion import interhuman
+from intermask.motion.actions import ACTIONS
 
 NUM_JOINTS = 22
 PELVIS, L_HIP, R_HIP, L_ANKLE, R_ANKLE, CHEST, NECK, HEAD = 0, 1, 2, 7, 8, 9, 12, 15
@@ -65,7 +66,7 @@ class SuccessThresholds:
     pat_reach: float = 0.26  # a wrist to the partner's shoulder joint, both ways; q99 .185, .200
     spacing: float = 0.24  # pelvis distance throughout (every action); q01 .331 hug, .711 handshake
     # Definitions, not measured (success_stats.UNMEASURED):
-    fps: float = 30.0  # frame rate of the motion (both datasets' protocols run at 30 fps)
+    fps: float = float(interhuman.FPS)  # frame rate of the motion (Inter-X's is the same)
     moving_speed: float = 0.1  # m/s: a joint faster than this moves (idle sway stays below 0.06)
     arrival: float = 0.30  # a wrist this close to the meeting point has arrived there
     lead: float = 0.0  # s the reactor may start before the actor: never (ties pass); q01 .167

@@ -20,6 +20,7 @@ from einops import rearrange
 from intermask.motion.mirror import mirror_joint_positions, mirror_joint_rot6d
 from intermask.motion.skeleton import FACE_JOINTS, FOOT_JOINTS, MIRROR_PERMUTATION, NUM_JOINTS
 
+FPS = 30  # frames per second of the release (InterGen), and of the embedded dataset
 RAW_DIM = 492
 NUM_RAW_JOINTS = 62  # 22 body + 30 hand joints + 10 finger tips
 NUM_RAW_ROTATIONS = 51  # joints 1..51

@@ -21,6 +21,7 @@ from intermask.motion.kinematics import forward_kinematics
 from intermask.motion.rotations import axis_angle_to_rot6d, rot6d_to_axis_angle, rot6d_to_matrix
 from intermask.motion.skeleton import NUM_JOINTS, REST_OFFSETS
 
+FPS = 30  # frames per second of the processed release
 NUM_ROWS = 56
 NUM_ROTATION_ROWS = 55
 TRANSLATION_ROW = 55

@@ -48,8 +48,8 @@ def pooled_text(
 ) -> torch.Tensor:
     """Captions -> (B, text_dim) frozen features at the end-of-text token (CLIP's pooling)."""
     features = text.get_or_encode(list(captions))
-    rows = torch.arange(features.tokens.shape[0], device=features.tokens.device)
-    pooled = features.tokens[rows, features.eot_index.to(features.tokens.device)]
+    rows = torch.arange(features.features.shape[0], device=features.features.device)
+    pooled = features.features[rows, features.eot_index.to(features.features.device)]
     return pooled.to(device=device, dtype=torch.float32)
 
 

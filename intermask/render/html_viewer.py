@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from intermask.motion import interhuman
 from intermask.motion.skeleton import LEFT_JOINTS, PARENTS
 from intermask.render.frames import DEFAULT_STYLE, HEAD_JOINT, Style
 from intermask.render.projection import VIEWS, UpAxis, prepare_joints
@@ -40,7 +41,7 @@ class ViewerSample:
     name: str
     caption: str
     joints: object
-    fps: float = 30.0
+    fps: float = float(interhuman.FPS)
     reference_person: int | None = None
     up_axis: UpAxis = "y"
 

@@ -165,7 +165,7 @@ class TextFeatureCache:
 
     def _encode_and_store(self, captions: list[str]) -> dict[str, tuple[torch.Tensor, int]]:
         features = self.encoder.encode(captions)
-        tokens = features.tokens.to(device="cpu", dtype=STORAGE_DTYPE)  # (b, L, D)
+        tokens = features.features.to(device="cpu", dtype=STORAGE_DTYPE)  # (b, L, D)
         entries = {}
         for row, caption in enumerate(captions):
             entry = (tokens[row].clone(), int(features.eot_index[row]))

@@ -31,9 +31,12 @@ _MODEL_CONFIG_DIR = Path(__file__).parent / "model_configs"
 
 
 class TextFeatures(NamedTuple):
-    tokens: torch.Tensor  # (B, L, D) per-token features after CLIP's ln_final
+    """What a text tower gives every text-conditioned network (Inter-M, MoMask, ARFlow)."""
+
+    features: torch.Tensor  # (B, L, D) per-token features after CLIP's ln_final
     eot_index: torch.Tensor  # (B,) int64 position of the end-of-text token
-    padding_mask: torch.Tensor  # (B, L) bool, True on the padding after the end-of-text token
+    padding_mask: torch.Tensor | None = None  # (B, L) bool, True after the end-of-text token;
+    # None: attend to all L
 
 
 @rank_zero_only

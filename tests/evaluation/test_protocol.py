@@ -328,3 +328,21 @@ def test_labelled_batches_give_every_row_with_positions_a_success_column():
     assert "success" not in plain.rows["Ground Truth"]
     assert "Success" not in markdown_table(plain)
     assert action_table(plain) == ""
+
+
+def test_the_constants_defaults_are_interhuman_s_config():
+    """One owner: configs/protocol/interhuman.yaml states the constants with their sources; the
+    dataclass's defaults (what code that builds it directly gets) must say the same."""
+    from dataclasses import fields
+
+    from omegaconf import OmegaConf
+
+    from intermask.config_files import config_dir
+
+    stated = OmegaConf.load(config_dir() / "protocol" / "interhuman.yaml")
+    defaults = {f.name: f.default for f in fields(ProtocolConstants)}
+    assert {k: v for k, v in stated.items() if k != "_target_"} == {
+        k: v for k, v in defaults.items() if k in stated
+    }
+    assert defaults["mm_replications"] == 5  # the paper's (section 4), once 20 here
+    assert set(defaults) - set(stated) == {"fid_reference"}  # InterGen's default, named in code

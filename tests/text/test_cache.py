@@ -38,8 +38,8 @@ def test_second_call_is_all_hits_and_identical(tmp_path, spy, tiny_encoder):
     for a, b in zip(first, second, strict=True):
         assert torch.equal(a, b)  # a miss is rounded to fp16 like a hit: bitwise equal
     fresh = tiny_encoder.encode(CAPTIONS)
-    assert first.tokens.dtype == torch.float32
-    torch.testing.assert_close(first.tokens, fresh.tokens, rtol=1e-3, atol=1e-3)  # fp16 storage
+    assert first.features.dtype == torch.float32
+    torch.testing.assert_close(first.features, fresh.features, rtol=1e-3, atol=1e-3)  # fp16 storage
     assert torch.equal(first.eot_index, fresh.eot_index)
     assert torch.equal(first.padding_mask, fresh.padding_mask)
 
@@ -53,8 +53,8 @@ def test_hits_and_misses_under_cpu_bf16_autocast(tmp_path, spy):
     with torch.autocast("cpu", dtype=torch.bfloat16):
         mixed = cache.get_or_encode(CAPTIONS)  # two hits and a miss
     assert (cache.hits, cache.misses) == (2, 3)
-    assert mixed.tokens.dtype == torch.float32 and mixed.tokens.shape[0] == 3
-    assert torch.equal(mixed.tokens[:2], plain.tokens)  # the hits: the stored fp16, widened
+    assert mixed.features.dtype == torch.float32 and mixed.features.shape[0] == 3
+    assert torch.equal(mixed.features[:2], plain.features)  # the hits: the stored fp16, widened
 
 
 def test_only_misses_are_encoded(tmp_path, spy):
@@ -64,9 +64,9 @@ def test_only_misses_are_encoded(tmp_path, spy):
     features = cache.get_or_encode([CAPTIONS[0], new, CAPTIONS[1], new])
     assert spy.calls == [CAPTIONS[:2], [new]]  # repeated caption encoded once
     assert (cache.hits, cache.misses) == (3, 3)
-    expected = cache.get_or_encode([new, CAPTIONS[0]]).tokens
-    assert torch.equal(features.tokens[[1, 0]], expected)  # rows follow the request order
-    assert torch.equal(features.tokens[1], features.tokens[3])
+    expected = cache.get_or_encode([new, CAPTIONS[0]]).features
+    assert torch.equal(features.features[[1, 0]], expected)  # rows follow the request order
+    assert torch.equal(features.features[1], features.features[3])
 
 
 def test_misses_are_encoded_in_chunks(tmp_path, spy):
@@ -84,7 +84,7 @@ def test_cache_survives_a_new_process(tmp_path, tiny_encoder):
     cache = TextFeatureCache(encoder=spy, cache_dir=tmp_path)
     second = cache.get_or_encode(CAPTIONS)
     assert spy.calls == [] and cache.disk_hits == 3 and cache.hits == 3
-    assert torch.equal(first.tokens, second.tokens) and torch.equal(
+    assert torch.equal(first.features, second.features) and torch.equal(
         first.eot_index, second.eot_index
     )
     assert not list(tmp_path.rglob("*.tmp"))  # atomic writes leave no temporary files
@@ -123,11 +123,11 @@ def test_memory_layer_is_a_bounded_lru(tmp_path, spy):
 
 def test_corrupt_entry_is_re_encoded_with_a_warning(tmp_path, spy, caplog):
     cache = TextFeatureCache(encoder=spy, cache_dir=tmp_path, memory_items=0)
-    expected = cache.get_or_encode(CAPTIONS[:1]).tokens
+    expected = cache.get_or_encode(CAPTIONS[:1]).features
     path = cache.path(CAPTIONS[0])
     path.write_bytes(b"torn")
     with caplog.at_level("WARNING", logger="intermask.text.cache"):
-        again = cache.get_or_encode(CAPTIONS[:1]).tokens
+        again = cache.get_or_encode(CAPTIONS[:1]).features
     assert str(path) in caplog.text and len(spy.calls) == 2
     assert torch.equal(again, expected)
     assert torch.load(path, weights_only=True)["caption"] == CAPTIONS[0]  # rewritten
@@ -163,5 +163,5 @@ def test_entries_of_the_batch_dependent_format_are_not_read(tmp_path, spy):
     features = cache.get_or_encode([caption])
     assert spy.calls == [[caption]] and cache.disk_hits == 0
     assert cache.directory.name != old_key and cache.path(caption).is_file()
-    assert not torch.equal(features.tokens[0].half(), stale)
+    assert not torch.equal(features.features[0].half(), stale)
     assert torch.equal(torch.load(old, weights_only=True)["tokens"], stale)  # left as it was

@@ -22,10 +22,10 @@ EOT_TOKEN = 49407  # the largest id of CLIP's BPE vocabulary
 
 def test_shapes_and_dtypes(tiny_encoder):
     features = tiny_encoder.encode(CAPTIONS)
-    assert features.tokens.shape == (3, 77, 64) and features.tokens.dtype == torch.float32
+    assert features.features.shape == (3, 77, 64) and features.features.dtype == torch.float32
     assert features.eot_index.shape == (3,) and features.eot_index.dtype == torch.int64
     assert features.padding_mask.shape == (3, 77) and features.padding_mask.dtype == torch.bool
-    assert tiny_encoder.width == 64 and torch.isfinite(features.tokens).all()
+    assert tiny_encoder.width == 64 and torch.isfinite(features.features).all()
 
 
 def test_eot_index_and_padding_mask(tiny_encoder):
@@ -47,7 +47,7 @@ def test_features_do_not_depend_on_the_batch(tiny_encoder):
     batch = tiny_encoder.encode(CAPTIONS)
     for row, caption in enumerate(CAPTIONS):
         alone = tiny_encoder.encode([caption])
-        assert torch.equal(alone.tokens[0], batch.tokens[row])  # bitwise
+        assert torch.equal(alone.features[0], batch.features[row])  # bitwise
         assert alone.eot_index.item() == batch.eot_index[row].item()
 
 
@@ -56,8 +56,8 @@ import torch
 from intermask.text import TINY_MODEL_NAME, FrozenCLIPTextEncoder
 encoder = FrozenCLIPTextEncoder(model_name=TINY_MODEL_NAME, pretrained=None, seed=0)
 captions = [f"person {i} waves {i % 7} times and the other bows" for i in range(300)]
-batch = encoder.encode(captions).tokens
-alone = torch.cat([encoder.encode([c]).tokens for c in captions[::37]])
+batch = encoder.encode(captions).features
+alone = torch.cat([encoder.encode([c]).features for c in captions[::37]])
 print(sum(not torch.equal(a, b) for a, b in zip(alone, batch[::37])), len(alone))
 """
 
@@ -83,7 +83,7 @@ def test_tokens_are_open_clip_text_features_before_pooling(tiny_encoder):
     torch.manual_seed(0)  # the encoder builds its random tower under seed 0 as well
     clip = open_clip.create_model(TINY_MODEL_NAME).eval()
     features = tiny_encoder.encode(CAPTIONS)
-    pooled = features.tokens[torch.arange(3), features.eot_index] @ clip.text_projection
+    pooled = features.features[torch.arange(3), features.eot_index] @ clip.text_projection
     with torch.no_grad():
         expected = clip.encode_text(tiny_encoder.tokenize(CAPTIONS))
     torch.testing.assert_close(pooled, expected, rtol=1e-5, atol=1e-5)
@@ -95,7 +95,7 @@ def test_frozen_and_always_in_eval_mode(tiny_encoder):
     assert not any(module.training for module in tiny_encoder.modules())
     with torch.enable_grad():
         features = tiny_encoder(CAPTIONS[:1])
-    assert not features.tokens.requires_grad and features.tokens.grad_fn is None
+    assert not features.features.requires_grad and features.features.grad_fn is None
 
 
 def test_random_towers_are_seeded(tiny_encoder):
@@ -103,8 +103,12 @@ def test_random_towers_are_seeded(tiny_encoder):
     other = FrozenCLIPTextEncoder(model_name=TINY_MODEL_NAME, seed=1)
     assert same.identity == tiny_encoder.identity != other.identity
     assert "random(seed=0)" in tiny_encoder.identity and TINY_MODEL_NAME in tiny_encoder.identity
-    torch.testing.assert_close(same.encode(CAPTIONS).tokens, tiny_encoder.encode(CAPTIONS).tokens)
-    assert not torch.allclose(other.encode(CAPTIONS).tokens, tiny_encoder.encode(CAPTIONS).tokens)
+    torch.testing.assert_close(
+        same.encode(CAPTIONS).features, tiny_encoder.encode(CAPTIONS).features
+    )
+    assert not torch.allclose(
+        other.encode(CAPTIONS).features, tiny_encoder.encode(CAPTIONS).features
+    )
 
 
 def test_random_tower_is_announced(caplog):

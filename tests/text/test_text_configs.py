@@ -31,4 +31,4 @@ def test_tiny_config_instantiates_offline(tmp_path):
     assert isinstance(cache, TextFeatureCache) and isinstance(cache.encoder, FrozenCLIPTextEncoder)
     assert cache.encoder.model_name == TINY_MODEL_NAME and cache.encoder.source == "random(seed=0)"
     assert cache.directory.parent == tmp_path / "text_cache"
-    assert cache.get_or_encode(["a person waves"]).tokens.shape == (1, 77, 64)
+    assert cache.get_or_encode(["a person waves"]).features.shape == (1, 77, 64)

@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 
 from intermask.data.common import single_threaded
-from intermask.data.synthetic.clips import ACTIONS, CONTACT_ACTIONS, SynthClip, generate_clip
+from intermask.data.synthetic.clips import SynthClip, generate_clip
 from intermask.data.synthetic.humanml3d import HumanML3DSummary, generate_humanml3d
 from intermask.data.synthetic.planning import assign_actions, assign_splits, prepare_folder
 from intermask.data.synthetic.writers import (
@@ -31,6 +31,7 @@ from intermask.data.synthetic.writers import (
     InterHumanWriter,
     InterXWriter,
 )
+from intermask.motion.actions import ACTIONS, CONTACT_ACTIONS
 from intermask.motion.kinds import DatasetKind, check_dataset_kind
 
 __all__ = [

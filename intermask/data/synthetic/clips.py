@@ -19,9 +19,10 @@ from intermask.data.synthetic.captions import make_captions
 from intermask.data.synthetic.choreography import Setup, sample_setup
 from intermask.data.synthetic.rig import PersonMotion, realize
 from intermask.data.synthetic.scene import FPS, Scene
+from intermask.motion.actions import ACTIONS
 from intermask.motion.rotations import rotation_about_axis
 
-# Action id = position in this table (Inter-X names carry it as Aaaa).
+# The choreography of each action of the vocabulary (intermask.motion.actions), in its order.
 INTERACTIONS: dict[str, Callable[[Setup], Scene]] = {
     "handshake": contact.handshake,
     "hug": contact.hug,
@@ -38,8 +39,8 @@ INTERACTIONS: dict[str, Callable[[Setup], Scene]] = {
     "pat_shoulder": contact.pat_shoulder,
     "beckon": locomotion.beckon,
 }
-ACTIONS: tuple[str, ...] = tuple(INTERACTIONS)
-CONTACT_ACTIONS = ("handshake", "hug", "push", "pass_object", "high_five", "pat_shoulder")
+if tuple(INTERACTIONS) != ACTIONS:
+    raise ImportError("the synthetic choreographies must follow intermask.motion.actions.ACTIONS")
 SIDES = ("left", "right")
 _WORLD_OFFSET = 1.0  # metres: the pair's centre lands within +-1 m of the origin
 

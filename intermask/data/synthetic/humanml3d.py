@@ -31,11 +31,12 @@ import torch
 from intermask.data.humanml3d import HumanML3DLayout
 from intermask.data.normalization import StatsAccumulator
 from intermask.data.synthetic.captions import make_solo_captions, moving_caption, processed_line
-from intermask.data.synthetic.clips import ACTIONS, SynthClip, generate_clip
+from intermask.data.synthetic.clips import SynthClip, generate_clip
 from intermask.data.synthetic.planning import assign_actions, assign_splits, prepare_folder
 from intermask.data.synthetic.scene import FPS as SOURCE_FPS
 from intermask.data.synthetic.writers import META_FILE, META_FORMAT, SPLITS
 from intermask.motion import humanml3d as hml
+from intermask.motion.actions import ACTIONS
 from intermask.motion.kinematics import forward_kinematics
 from intermask.motion.rotations import matrix_to_quaternion, quaternion_to_matrix
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from intermask.data.synthetic.clips import ACTIONS
 from intermask.data.synthetic.writers import META_FILE, META_FORMAT
+from intermask.motion.actions import ACTIONS
 
 _SPLIT_STREAM = 1  # random streams of the dataset-level draws, apart from the per-clip ones
 _ACTION_STREAM = 2

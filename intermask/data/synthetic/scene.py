@@ -19,8 +19,9 @@ import torch
 
 from intermask.data.synthetic.body import SIDE_SIGN, BodyShape
 from intermask.data.synthetic.primitives import Walk, wave
+from intermask.motion import interhuman
 
-FPS = 30
+FPS = interhuman.FPS  # the embedded dataset is written at the official rate
 MIN_SECONDS, MAX_SECONDS = 2.0, 10.0
 _IDLE_SWAY = 0.012  # rad: breathing-like spine sway, far below any speed threshold
 
