@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import copy
 import importlib
 import sys
 import types
@@ -107,10 +108,15 @@ def reference_modules(checkout: Path, marker: str) -> Iterator[None]:
 
 
 def clip_stub(model: torch.nn.Module, tokenize: Any) -> types.ModuleType:
-    """A ``clip`` module (OpenAI's package) whose ``load`` returns ``model`` instead of
-    downloading weights and whose ``tokenize`` is ``tokenize``; installed in ``sys.modules``."""
+    """A ``clip`` module (OpenAI's package) whose ``load`` returns a copy of ``model`` instead of
+    downloading weights and whose ``tokenize`` is ``tokenize``; installed in ``sys.modules``.
+
+    Every call gets its own copy, as every ``clip.load`` reads its own weights: the authors'
+    modules keep CLIP's embeddings as submodules, and loading a checkpoint into one of them
+    (InterCLIP's ``token_embedding``) must not change another's (the generator's text input).
+    """
     module = types.ModuleType("clip")
-    module.load = lambda *args, **kwargs: (model, None)
+    module.load = lambda *args, **kwargs: (copy.deepcopy(model), None)
     module.tokenize = tokenize
     sys.modules["clip"] = module
     return module
