@@ -312,42 +312,87 @@ def _rows(
     cuda_graphs: bool = False,
 ) -> None:
     """Measure every row into ``report`` (its peak is the yardstick of ``% peak``)."""
-    threads, peak = torch.get_num_threads(), report.peak_gflops
+    run = _Run(report, dev, log, repeats)
     vq, module = build_models(size, dev)
     net = module.net.eval()
     steps = frames // FRAMES_PER_STEP
+    run.add(_forward_row(run, net, steps))
+    best = _interaction_rows(run, net, vq, steps, batches, cuda_graphs)
+    run.add(_interm_train_row(run, module, vq, frames, train_batch))
+    _vq_rows(run, vq, vq_batch)
+    run.add(_protocol_row(run, best, frames, test_split))
 
-    def add(row: Row) -> None:
+
+@dataclass
+class _Run:
+    """What the rows of one bench run share: the report they go to, the log, the device and
+    how often a call is timed."""
+
+    report: Report
+    dev: torch.device
+    log: Callable[[str], None]
+    repeats: int
+    threads: int = field(default_factory=torch.get_num_threads)
+
+    def add(self, row: Row) -> None:
+        """Derive the rate columns from the report's peak, record the row and log it."""
         if row.flops is not None:
             row.gflops_per_s = row.flops / row.seconds / 1e9
-            row.pct_peak = 100 * row.gflops_per_s / peak
-        report.rows.append(row)
-        log(format_row(row))
+            row.pct_peak = 100 * row.gflops_per_s / self.report.peak_gflops
+        self.report.rows.append(row)
+        self.log(format_row(row))
 
-    # one Inter-M forward
-    tokens = torch.randint(0, net.codebook_size, (1, net.rows, steps), device=dev)
-    lengths = torch.tensor([steps], device=dev)
-    text = _text(net, 1, dev)
-    with torch.no_grad():
+    def row(self, name: str, batch: int, wall: float, cpu: float, **columns: Any) -> Row:
+        """A row of ``batch`` samples measured in ``wall`` and ``cpu`` seconds per call."""
+        return Row(name, str(self.dev), self.threads, batch, wall, cpu, wall / batch, **columns)
 
-        def forward() -> None:
-            net(tokens, tokens, text, lengths)
+    def counted(self, name: str, fn: Callable[[], None], repeats: int) -> Row:
+        """A no-grad call at batch 1: its FLOPs counted once, then timed over ``repeats``."""
+        with torch.no_grad():
+            with FlopCounterMode(display=False) as counter:
+                fn()
+            wall, cpu = _timed(fn, self.dev, repeats)
+        return self.row(name, 1, wall, cpu, flops=counter.get_total_flops())
 
-        with FlopCounterMode(display=False) as counter:
-            forward()
-        wall, cpu = _timed(forward, dev, repeats)
-    add(
-        Row(
-            "interm_forward", str(dev), threads, 1, wall, cpu, wall, flops=counter.get_total_flops()
+    def training(self, name: str, step: Callable[[], None], batch: int, note: str = "") -> Row:
+        """An optimizer step: run once (the optimizer's state exists before memory is
+        measured), then timed and its peak memory taken."""
+        step()
+        with PeakMemory(self.dev) as memory:
+            wall, cpu = _timed(step, self.dev, self.repeats, warm=True)
+        return self.row(
+            name, batch, wall, cpu, samples_per_s=batch / wall, peak_memory_mb=memory.mb, note=note
         )
-    )
 
-    # whole interactions per batch size; the graphs outlive a call, as in the protocol
+
+def _forward_row(run: _Run, net: InterMTransformer, steps: int) -> Row:
+    """One Inter-M forward at batch 1 on ``steps`` token steps."""
+    tokens = torch.randint(0, net.codebook_size, (1, net.rows, steps), device=run.dev)
+    lengths = torch.tensor([steps], device=run.dev)
+    text = _text(net, 1, run.dev)
+
+    def forward() -> None:
+        net(tokens, tokens, text, lengths)
+
+    return run.counted("interm_forward", forward, run.repeats)
+
+
+def _interaction_rows(
+    run: _Run,
+    net: InterMTransformer,
+    vq: MotionVQVAE,
+    steps: int,
+    batches: tuple[int, ...],
+    cuda_graphs: bool,
+) -> Row:
+    """Whole interactions (generation and VQ decoding) per batch size, recorded with the best
+    per-sample time marked; returns that best row. The graphs outlive a call, as in the
+    protocol."""
     graphed = GraphedForward(net, enabled=cuda_graphs)
     rows = []
     for batch in batches:
-        text = _text(net, batch, dev)
-        lengths = torch.full((batch,), steps, device=dev)
+        text = _text(net, batch, run.dev)
+        lengths = torch.full((batch,), steps, device=run.dev)
 
         @torch.no_grad()
         def interaction(text=text, lengths=lengths, batch=batch, forward=graphed) -> None:
@@ -356,34 +401,27 @@ def _rows(
 
         with FlopCounterMode(display=False) as counter:
             interaction(forward=None)  # eager: a replayed graph runs no countable operator
-        wall, cpu = _timed(interaction, dev, max(1, repeats // 2))  # its warm-up captures
-        rows.append(
-            Row(
-                "interaction",
-                str(dev),
-                threads,
-                batch,
-                wall,
-                cpu,
-                wall / batch,
-                flops=counter.get_total_flops(),
-            )
-        )
+        wall, cpu = _timed(interaction, run.dev, max(1, run.repeats // 2))  # its warm-up captures
+        rows.append(run.row("interaction", batch, wall, cpu, flops=counter.get_total_flops()))
     best = min(rows, key=lambda r: r.per_sample_seconds)
     best.best = True
     for row in rows:
-        add(row)
+        run.add(row)
+    return best
 
-    # Inter-M training step
+
+def _interm_train_row(
+    run: _Run, module: InterMModule, vq: MotionVQVAE, frames: int, train_batch: int
+) -> Row:
+    """An Inter-M optimizer step on ``train_batch`` random crops of ``frames`` frames."""
     module.train()
     optimizer = module.optimizer_factory(module.net.parameters())
-    features = vq.view.feature_shape
     batch = {
-        "motion": torch.randn(train_batch, 2, frames, *features, device=dev),
-        "length": torch.full((train_batch,), frames, device=dev),
+        "motion": torch.randn(train_batch, 2, frames, *vq.view.feature_shape, device=run.dev),
+        "length": torch.full((train_batch,), frames, device=run.dev),
         "caption": [CAPTIONS[i % len(CAPTIONS)] for i in range(train_batch)],
     }
-    generator = torch.Generator(device=dev).manual_seed(0)
+    generator = torch.Generator(device=run.dev).manual_seed(0)
 
     def train_step() -> None:
         losses = module.compute_losses(batch, condition_drop=0.1, generator=generator)
@@ -391,22 +429,16 @@ def _rows(
         losses.total.backward()
         optimizer.step()
 
-    def training_row(name: str, step: Callable[[], None], batch: int, note: str = "") -> Row:
-        step()  # the optimizer's state exists before memory is measured
-        with PeakMemory(dev) as memory:
-            wall, cpu = _timed(step, dev, repeats, warm=True)
-        return Row(
-            name, str(dev), threads, batch, wall, cpu, wall / batch,
-            samples_per_s=batch / wall, peak_memory_mb=memory.mb, note=note,
-        )  # fmt: skip
-
     unroll = "on" if module.hparams.step_unroll else "off"
-    add(training_row("interm_train_step", train_step, train_batch, f"step unroll {unroll}"))
+    return run.training("interm_train_step", train_step, train_batch, f"step unroll {unroll}")
 
-    # VQ-VAE training step and round trip
-    vq_module = VQVAEModule(net=vq, optimizer=torch.optim.AdamW).to(dev).train()
+
+def _vq_rows(run: _Run, vq: MotionVQVAE, vq_batch: int) -> None:
+    """Record a VQ-VAE optimizer step on ``vq_batch`` 64-frame windows, then the encode + decode
+    round trip of one window."""
+    vq_module = VQVAEModule(net=vq, optimizer=torch.optim.AdamW).to(run.dev).train()
     vq_optimizer = torch.optim.AdamW(vq.parameters(), lr=2e-4)
-    windows = torch.randn(vq_batch, 64, *features, device=dev)
+    windows = torch.randn(vq_batch, 64, *vq.view.feature_shape, device=run.dev)
 
     def vq_step() -> None:
         losses = vq_module.compute_losses({"motion": windows})
@@ -415,20 +447,19 @@ def _rows(
         vq_optimizer.step()
 
     vq.requires_grad_(True)
-    add(training_row("vq_train_step", vq_step, vq_batch))
+    run.add(run.training("vq_train_step", vq_step, vq_batch))
     vq.eval()
     window = windows[:1]
-    with torch.no_grad():
 
-        def roundtrip() -> None:
-            vq.decode(vq.encode(window))
+    def roundtrip() -> None:
+        vq.decode(vq.encode(window))
 
-        with FlopCounterMode(display=False) as counter:
-            roundtrip()
-        wall, cpu = _timed(roundtrip, dev, repeats * 3)
-    add(Row("vq_roundtrip", str(dev), threads, 1, wall, cpu, wall, flops=counter.get_total_flops()))
+    run.add(run.counted("vq_roundtrip", roundtrip, run.repeats * 3))
 
-    # the protocol, extrapolated
+
+def _protocol_row(run: _Run, best: Row, frames: int, test_split: Path | None) -> Row:
+    """The protocol's generations (replications x test items + MultiModality) at ``best``'s
+    per-sample time."""
     constants: ProtocolConstants = instantiate(
         OmegaConf.load(config_dir() / "protocol/interhuman.yaml")
     )
@@ -437,16 +468,14 @@ def _rows(
     multimodality = constants.mm_replications * constants.mm_texts * constants.mm_generations
     count = constants.replications * items + multimodality
     seconds = count * best.per_sample_seconds
-    add(
-        Row(
-            "protocol", str(dev), threads, best.batch, seconds, count * best.cpu_seconds / best.batch,
-            best.per_sample_seconds,
-            note=(
-                f"{count} generations at {frames} frames: {constants.replications} x {items} test "
-                f"items ({source}) + {constants.mm_replications} x {constants.mm_texts} x "
-                f"{constants.mm_generations} MultiModality = {seconds / 3600:.1f} h"
-            ),
-        )
+    return Row(
+        "protocol", str(run.dev), run.threads, best.batch, seconds,
+        count * best.cpu_seconds / best.batch, best.per_sample_seconds,
+        note=(
+            f"{count} generations at {frames} frames: {constants.replications} x {items} test "
+            f"items ({source}) + {constants.mm_replications} x {constants.mm_texts} x "
+            f"{constants.mm_generations} MultiModality = {seconds / 3600:.1f} h"
+        ),
     )  # fmt: skip
 
 

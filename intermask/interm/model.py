@@ -61,6 +61,30 @@ def _normal_init(module: nn.Module) -> None:
             nn.init.zeros_(module.bias)
 
 
+def _check_architecture(
+    *, modeling: str, width: int, use_cross_attention: bool, cross_context_quirk: bool
+) -> None:
+    """Reject the :class:`InterMTransformer` settings that do not make a model: an unknown
+    modeling, alternative modeling without cross attention or with the cross-context quirk, a
+    width the 2D positional encoding cannot split."""
+    if modeling not in MODELINGS:
+        raise ValueError(f"modeling must be one of {MODELINGS}, got {modeling!r}")
+    if modeling == "alternative" and not use_cross_attention:
+        raise ValueError(
+            "modeling='alternative' conditions the predicted person on the other person only "
+            "through cross attention; it cannot be combined with use_cross_attention=False"
+        )
+    if modeling == "alternative" and cross_context_quirk:
+        raise ValueError(
+            "cross_context_quirk has no effect with modeling='alternative' (the context is "
+            "always the other person's input embeddings); leave it False"
+        )
+    if width % 4:
+        raise ValueError(
+            f"width must be divisible by 4 for the 2D positional encoding, got {width}"
+        )
+
+
 class InterMTransformer(nn.Module):
     """Collaborative masked-token model of two persons (InterMask section 3.2).
 
@@ -123,22 +147,12 @@ class InterMTransformer(nn.Module):
         code_dim: int | None = None,
     ) -> None:
         super().__init__()
-        if modeling not in MODELINGS:
-            raise ValueError(f"modeling must be one of {MODELINGS}, got {modeling!r}")
-        if modeling == "alternative" and not use_cross_attention:
-            raise ValueError(
-                "modeling='alternative' conditions the predicted person on the other person only "
-                "through cross attention; it cannot be combined with use_cross_attention=False"
-            )
-        if modeling == "alternative" and cross_context_quirk:
-            raise ValueError(
-                "cross_context_quirk has no effect with modeling='alternative' (the context is "
-                "always the other person's input embeddings); leave it False"
-            )
-        if width % 4:
-            raise ValueError(
-                f"width must be divisible by 4 for the 2D positional encoding, got {width}"
-            )
+        _check_architecture(
+            modeling=modeling,
+            width=width,
+            use_cross_attention=use_cross_attention,
+            cross_context_quirk=cross_context_quirk,
+        )
         self.vocabulary = Vocabulary(codebook_size)
         self.codebook_size, self.rows, self.text_dim = codebook_size, rows, text_dim
         self.modeling, self.text_attends_padding = modeling, text_attends_padding

@@ -105,6 +105,71 @@ def _base_codebook(vq: MotionVQVAE) -> torch.Tensor:
     return vq.quantizer.layers[0].codebook
 
 
+def _network_for(
+    net: InterMTransformer | Callable[..., InterMTransformer],
+    *,
+    vq: MotionVQVAE,
+    text: TextFeatureCache,
+    code_vectors: bool,
+) -> tuple[InterMTransformer, int | None]:
+    """The Inter-M network that fits the frozen tokenizer and text encoder, and its code-vector
+    width (None without code vectors).
+
+    A factory ``net`` is built with the VQ's codebook size (and code width when
+    ``code_vectors``); a built one must already match them. With code vectors the network gets
+    the VQ's base codebook. Raises ValueError on a two-person VQ-VAE or any mismatch.
+    """
+    if isinstance(vq.view, TwoPersonView):
+        raise ValueError("the Inter-M Transformer needs a single-person VQ-VAE, got persons=2")
+    vq_codes = vq.quantizer.codebook_size
+    code_dim = int(_base_codebook(vq).shape[1]) if code_vectors else None
+    if not isinstance(net, InterMTransformer):  # a factory: the VQ owns the codebook size
+        net = net(codebook_size=vq_codes, code_dim=code_dim)
+    if vq_codes != net.codebook_size:
+        raise ValueError(
+            f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"
+        )
+    if net.code_dim != code_dim:
+        raise ValueError(
+            f"code_vectors={code_vectors} needs net.code_dim {code_dim} (the VQ's code width "
+            f"when on, None when off), got {net.code_dim}"
+        )
+    if code_dim is not None:
+        net.set_code_vectors(_base_codebook(vq))
+    if text.encoder.width != net.text_dim:
+        raise ValueError(
+            f"net.text_dim ({net.text_dim}) must equal the text encoder width ({text.encoder.width})"
+        )
+    return net, code_dim
+
+
+def _check_training_settings(
+    *,
+    probabilities: dict[str, float],
+    warmup_fraction: float,
+    lr_decay: str,
+    lr_milestones: Sequence[float],
+    lr_final: float,
+    validation_samples: int,
+    sample_iterations: int,
+) -> None:
+    """Raise ValueError on an :class:`InterMModule` setting out of range: a masking or
+    condition-drop probability outside [0, 1] (``probabilities``: name -> value), a warm-up
+    fraction outside [0, 1), a learning-rate decay its milestones do not fit, a negative sample
+    count or no decoding iteration."""
+    for name, prob in probabilities.items():
+        if not 0.0 <= prob <= 1.0:
+            raise ValueError(f"{name} must lie in [0, 1], got {prob}")
+    if not 0.0 <= warmup_fraction < 1.0:
+        raise ValueError(f"warmup_fraction must lie in [0, 1), got {warmup_fraction}")
+    check_lr_decay(lr_decay, lr_milestones, lr_final)
+    if validation_samples < 0 or sample_iterations < 1:
+        raise ValueError(
+            f"validation_samples must be >= 0 and sample_iterations >= 1, got "
+            f"{validation_samples} and {sample_iterations}"
+        )
+
+
 class InterMModule(FrozenTokenizerHooks, LossStepsModule):
     """Trains :class:`InterMTransformer` on interaction batches of the DataModule.
 
@@ -172,43 +237,22 @@ class InterMModule(FrozenTokenizerHooks, LossStepsModule):
         code_vectors: bool = False,
     ) -> None:
         super().__init__()
-        if isinstance(vq.view, TwoPersonView):
-            raise ValueError("the Inter-M Transformer needs a single-person VQ-VAE, got persons=2")
+        net, code_dim = _network_for(net, vq=vq, text=text, code_vectors=code_vectors)
         vq_codes = vq.quantizer.codebook_size
-        code_dim = int(_base_codebook(vq).shape[1]) if code_vectors else None
-        if not isinstance(net, InterMTransformer):  # a factory: the VQ owns the codebook size
-            net = net(codebook_size=vq_codes, code_dim=code_dim)
-        if vq_codes != net.codebook_size:
-            raise ValueError(
-                f"net.codebook_size ({net.codebook_size}) must equal the VQ codebook size ({vq_codes})"
-            )
-        if net.code_dim != code_dim:
-            raise ValueError(
-                f"code_vectors={code_vectors} needs net.code_dim {code_dim} (the VQ's code width "
-                f"when on, None when off), got {net.code_dim}"
-            )
-        if code_dim is not None:
-            net.set_code_vectors(_base_codebook(vq))
-        if text.encoder.width != net.text_dim:
-            raise ValueError(
-                f"net.text_dim ({net.text_dim}) must equal the text encoder width ({text.encoder.width})"
-            )
-        for name, prob in (
-            ("p_random", p_random),
-            ("p_solo", p_solo),
-            ("p_partner", p_partner),
-            ("condition_drop", condition_drop),
-        ):
-            if not 0.0 <= prob <= 1.0:
-                raise ValueError(f"{name} must lie in [0, 1], got {prob}")
-        if not 0.0 <= warmup_fraction < 1.0:
-            raise ValueError(f"warmup_fraction must lie in [0, 1), got {warmup_fraction}")
-        check_lr_decay(lr_decay, lr_milestones, lr_final)
-        if validation_samples < 0 or sample_iterations < 1:
-            raise ValueError(
-                f"validation_samples must be >= 0 and sample_iterations >= 1, got "
-                f"{validation_samples} and {sample_iterations}"
-            )
+        _check_training_settings(
+            probabilities={
+                "p_random": p_random,
+                "p_solo": p_solo,
+                "p_partner": p_partner,
+                "condition_drop": condition_drop,
+            },
+            warmup_fraction=warmup_fraction,
+            lr_decay=lr_decay,
+            lr_milestones=lr_milestones,
+            lr_final=lr_final,
+            validation_samples=validation_samples,
+            sample_iterations=sample_iterations,
+        )
         self.net = net
         self.last_samples: tuple[list[str], GeneratedMotion] | None = None
         vq.eval().requires_grad_(False)

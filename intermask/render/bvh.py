@@ -241,23 +241,48 @@ def read_bvh(path: str | Path, *, scale: float = 1.0) -> BvhClip:
     if "MOTION" not in text:
         raise ValueError(f"{path}: not a BVH file (no MOTION section)")
     tokens = _Tokens(text, path)
-    tokens.next("HIERARCHY")
-    names: list[str] = []
-    parents: list[int] = []
-    offsets: list[list[float]] = []
-    channels: list[list[str]] = []
-    end_sites: dict[int, np.ndarray] = {}
+    hierarchy = _read_hierarchy(tokens, scale)
+    if tokens.next() != "MOTION":
+        raise ValueError(f"{path}: only one ROOT per file is supported")
+    frame_time, data = _read_motion(tokens, sum(len(c) for c in hierarchy.channels))
+    root_positions, rotations = _pose_channels(hierarchy, data, path)
+    return BvhClip(
+        names=tuple(hierarchy.names),
+        parents=tuple(hierarchy.parents),
+        offsets=np.array(hierarchy.offsets) / scale,
+        root_positions=root_positions / scale,
+        rotations=rotations,
+        frame_time=frame_time,
+        end_sites=hierarchy.end_sites,
+    )
+
+
+@dataclass
+class _Hierarchy:
+    """A BVH HIERARCHY section, joints in file (depth-first) order: offsets as written, end
+    sites already divided by the reader's scale."""
+
+    names: list[str] = field(default_factory=list)
+    parents: list[int] = field(default_factory=list)
+    offsets: list[list[float]] = field(default_factory=list)
+    channels: list[list[str]] = field(default_factory=list)
+    end_sites: dict[int, np.ndarray] = field(default_factory=dict)
+
+
+def _read_hierarchy(tokens: _Tokens, scale: float) -> _Hierarchy:
+    """Read ``HIERARCHY ROOT ...`` up to the end of the first root joint."""
+    hierarchy = _Hierarchy()
 
     def joint(parent: int) -> None:
-        index = len(names)
-        names.append(tokens.next())
-        parents.append(parent)
+        index = len(hierarchy.names)
+        hierarchy.names.append(tokens.next())
+        hierarchy.parents.append(parent)
         tokens.next("{")
         tokens.next("OFFSET")
-        offsets.append(tokens.floats(3))
+        hierarchy.offsets.append(tokens.floats(3))
         tokens.next("CHANNELS")
         count = int(tokens.next())
-        channels.append([tokens.next() for _ in range(count)])
+        hierarchy.channels.append([tokens.next() for _ in range(count)])
         while True:
             keyword = tokens.next()
             if keyword == "}":
@@ -268,39 +293,52 @@ def read_bvh(path: str | Path, *, scale: float = 1.0) -> BvhClip:
                 tokens.next("Site")
                 tokens.next("{")
                 tokens.next("OFFSET")
-                end_sites[index] = np.array(tokens.floats(3)) / scale
+                hierarchy.end_sites[index] = np.array(tokens.floats(3)) / scale
                 tokens.next("}")
             else:
-                raise ValueError(f"{path}: unexpected {keyword!r} inside joint {names[index]!r}")
+                raise ValueError(
+                    f"{tokens.path}: unexpected {keyword!r} inside joint {hierarchy.names[index]!r}"
+                )
 
+    tokens.next("HIERARCHY")
     tokens.next("ROOT")
     joint(-1)
-    if tokens.next() != "MOTION":
-        raise ValueError(f"{path}: only one ROOT per file is supported")
+    return hierarchy
+
+
+def _read_motion(tokens: _Tokens, width: int) -> tuple[float, np.ndarray]:
+    """The MOTION section after its keyword: frame time and the (frames, width) channel values."""
     tokens.next("Frames:")
     frames = int(tokens.next())
     tokens.next("Frame")
     tokens.next("Time:")
     frame_time = float(tokens.next())
-    width = sum(len(c) for c in channels)
     data = np.array(tokens.items[tokens.position :], dtype=np.float64)
     if data.size != frames * width:
         raise ValueError(
-            f"{path}: expected {frames} frames x {width} channels = {frames * width} numbers, got {data.size}"
+            f"{tokens.path}: expected {frames} frames x {width} channels = {frames * width} "
+            f"numbers, got {data.size}"
         )
-    data = data.reshape(frames, width)
+    return frame_time, data.reshape(frames, width)
+
+
+def _pose_channels(
+    hierarchy: _Hierarchy, data: np.ndarray, path: Path
+) -> tuple[np.ndarray, np.ndarray]:
+    """(frames, width) channel values -> (T, 3) root positions (the root's OFFSET plus its
+    position channels, unscaled) and (T, J, 3, 3) local rotations, each joint's rotation
+    channels applied left to right."""
+    frames, names = len(data), hierarchy.names
     rotations = np.broadcast_to(np.eye(3), (frames, len(names), 3, 3)).copy()
-    root_positions = np.broadcast_to(np.array(offsets[0]), (frames, 3)).copy()
+    root_positions = np.broadcast_to(np.array(hierarchy.offsets[0]), (frames, 3)).copy()
     column = 0
-    for index, joint_channels in enumerate(channels):
-        rotation_axes = ""
+    for index, joint_channels in enumerate(hierarchy.channels):
         for k, channel in enumerate(joint_channels):
             values = data[:, column + k]
             if channel.endswith("rotation") and channel[0] in _AXES:
                 rotations[:, index] = rotations[:, index] @ _axis_matrix(
                     np.radians(values), _AXES.index(channel[0])
                 )
-                rotation_axes += channel[0]
             elif channel.endswith("position") and channel[0] in _AXES:
                 if index != 0:
                     raise ValueError(
@@ -310,15 +348,7 @@ def read_bvh(path: str | Path, *, scale: float = 1.0) -> BvhClip:
             else:
                 raise ValueError(f"{path}: unknown channel {channel!r} of joint {names[index]!r}")
         column += len(joint_channels)
-    return BvhClip(
-        names=tuple(names),
-        parents=tuple(parents),
-        offsets=np.array(offsets) / scale,
-        root_positions=root_positions / scale,
-        rotations=rotations,
-        frame_time=frame_time,
-        end_sites=end_sites,
-    )
+    return root_positions, rotations
 
 
 def bvh_joint_positions(clip: BvhClip) -> np.ndarray:

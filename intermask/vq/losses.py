@@ -133,53 +133,89 @@ def vq_losses(
             frame_mask,
         ),
     )
-    positions = velocity = bones = foot_contact = zero
-    relative = dict.fromkeys(PELVIS_RELATIVE_TERMS, zero)
-    if predicted_geometry.positions is not None and target_geometry.positions is not None:
-        predicted, real = predicted_geometry.positions, target_geometry.positions
-        positions = _masked_mean(elementwise_loss(predicted, real, kind), frame_mask)
-        step_mask = frame_mask[:, 1:] & frame_mask[:, :-1]
-        predicted_step, real_step = predicted[:, 1:] - predicted[:, :-1], real[:, 1:] - real[:, :-1]
-        velocity = _masked_mean(elementwise_loss(predicted_step, real_step, kind), step_mask)
-        for name, joints in PELVIS_RELATIVE_TERMS.items():
-            relative[name] = _measured(
-                getattr(weights, name),
-                measure_unweighted,
-                zero,
-                partial(_pelvis_relative, predicted, real, joints, kind, frame_mask),
-            )
-        bones = _masked_mean(
-            elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
-        )
-        if target_geometry.contacts is not None:
-            # planted feet (GT label) must not slide in the reconstruction
-            feet_step = predicted_step[:, :, list(FOOT_JOINTS)]  # (B, T-1, 4, 3)
-            planted = target_geometry.contacts[:, :-1, :, None]
-            foot_contact = _masked_mean(
-                elementwise_loss(feet_step * planted, torch.zeros_like(feet_step), kind), step_mask
-            )
+    joints = _joint_terms(
+        predicted_geometry,
+        target_geometry,
+        frame_mask=frame_mask,
+        weights=weights,
+        kind=kind,
+        measure_unweighted=measure_unweighted,
+        zero=zero,
+    )
     total = (
         weights.reconstruction * reconstruction
-        + weights.positions * positions
-        + weights.velocity * velocity
-        + weights.bone_length * bones
+        + weights.positions * joints.positions
+        + weights.velocity * joints.velocity
+        + weights.bone_length * joints.bone_length
         + weights.geodesic * geodesic
-        + weights.foot_contact * foot_contact
+        + weights.foot_contact * joints.foot_contact
         + weights.commitment * commit_loss
     )
-    for name, term in relative.items():  # added one by one, in order: the same rounding as ever
+    for name, term in joints.relative.items():  # one by one, in order: the same rounding as ever
         total = total + getattr(weights, name) * term
     return LossTerms(
         total=total,
         reconstruction=reconstruction,
-        positions=positions,
-        velocity=velocity,
-        bone_length=bones,
+        positions=joints.positions,
+        velocity=joints.velocity,
+        bone_length=joints.bone_length,
         geodesic=geodesic,
-        foot_contact=foot_contact,
+        foot_contact=joints.foot_contact,
         commitment=commit_loss,
-        **relative,
+        **joints.relative,
     )
+
+
+class _JointTerms(NamedTuple):
+    """The loss terms on joint positions (unweighted)."""
+
+    positions: torch.Tensor
+    velocity: torch.Tensor
+    bone_length: torch.Tensor
+    foot_contact: torch.Tensor
+    relative: dict[str, torch.Tensor]  # PELVIS_RELATIVE_TERMS name -> term, in that order
+
+
+def _joint_terms(
+    predicted_geometry: Geometry,
+    target_geometry: Geometry,
+    *,
+    frame_mask: torch.Tensor,
+    weights: LossWeights,
+    kind: LossKind,
+    measure_unweighted: bool,
+    zero: torch.Tensor,
+) -> _JointTerms:
+    """Positions, velocity, bone length, foot contact and the pelvis-relative terms of
+    :func:`vq_losses`: all ``zero`` without positions on both sides, foot contact ``zero``
+    without the target's contact labels."""
+    relative = dict.fromkeys(PELVIS_RELATIVE_TERMS, zero)
+    if predicted_geometry.positions is None or target_geometry.positions is None:
+        return _JointTerms(zero, zero, zero, zero, relative)
+    predicted, real = predicted_geometry.positions, target_geometry.positions
+    positions = _masked_mean(elementwise_loss(predicted, real, kind), frame_mask)
+    step_mask = frame_mask[:, 1:] & frame_mask[:, :-1]
+    predicted_step, real_step = predicted[:, 1:] - predicted[:, :-1], real[:, 1:] - real[:, :-1]
+    velocity = _masked_mean(elementwise_loss(predicted_step, real_step, kind), step_mask)
+    for name, joints in PELVIS_RELATIVE_TERMS.items():
+        relative[name] = _measured(
+            getattr(weights, name),
+            measure_unweighted,
+            zero,
+            partial(_pelvis_relative, predicted, real, joints, kind, frame_mask),
+        )
+    bones = _masked_mean(
+        elementwise_loss(bone_lengths(predicted), bone_lengths(real), kind), frame_mask
+    )
+    foot_contact = zero
+    if target_geometry.contacts is not None:
+        # planted feet (GT label) must not slide in the reconstruction
+        feet_step = predicted_step[:, :, list(FOOT_JOINTS)]  # (B, T-1, 4, 3)
+        planted = target_geometry.contacts[:, :-1, :, None]
+        foot_contact = _masked_mean(
+            elementwise_loss(feet_step * planted, torch.zeros_like(feet_step), kind), step_mask
+        )
+    return _JointTerms(positions, velocity, bones, foot_contact, relative)
 
 
 def _measured(

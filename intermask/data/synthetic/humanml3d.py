@@ -171,15 +171,7 @@ def generate_humanml3d(
     actions = assign_actions(clips, seed)
     prepare_folder(out)  # refuses a folder that holds anything but a synthetic dataset
     layout = HumanML3DLayout(out)
-    for name in LAYOUT_ENTRIES:
-        path = out / name
-        if path.is_dir():
-            for child in sorted(path.iterdir()):
-                child.unlink()
-        elif path.exists():
-            path.unlink()
-    for folder in ("new_joint_vecs", "new_joints", "texts"):
-        (out / folder).mkdir(exist_ok=True)
+    _clear_layout(out)
     ids: dict[str, list[str]] = {split: [] for split in SPLITS}
     meta: dict[str, dict[str, object]] = {}
     stats = StatsAccumulator((hml.FEATURE_DIM,))
@@ -189,26 +181,8 @@ def generate_humanml3d(
     try:
         for index, (action, split) in enumerate(zip(actions, splits, strict=True)):
             clip_id = f"{index:06d}"
-            clip = generate_clip(seed=seed, index=index, action=action, vary_bodies=False)
-            motion = hml.features_from_positions(*resample(clip, clip.actor - 1))
-            features = motion.features.numpy().astype(np.float32)
-            np.save(layout.motion_file(clip_id), features)
-            np.save(layout.joints_file(clip_id), motion.joints.numpy().astype(np.float32))
-            rng = np.random.default_rng(np.random.SeedSequence([seed, index, _CAPTION_TAG]))
-            captions = make_solo_captions(rng, action=action, side=clip.side, speed=clip.speed)
-            lines = [processed_line(caption) for caption in captions]
-            span = moving_span(motion.joints)
-            if span is not None:
-                step = (
-                    motion.joints[span[0] + 1 : span[1], 0]
-                    - motion.joints[span[0] : span[1] - 1, 0]
-                )
-                speed = float(torch.linalg.vector_norm(step[:, [0, 2]], dim=-1).mean()) * hml.FPS
-                lines.append(
-                    processed_line(moving_caption(rng, speed), _seconds(span[0]), _seconds(span[1]))
-                )
-                subclips += 1
-            _write_lines(layout.caption_file(clip_id), lines)
+            clip, features, tagged = _write_clip(layout, clip_id, seed, index, action)
+            subclips += tagged
             outside += not 40 <= len(features) < 200
             if split == "train":
                 stats.update(features)
@@ -220,13 +194,8 @@ def generate_humanml3d(
             }
     finally:
         torch.set_num_threads(threads)
-    mean, std, _ = stats.compute(min_std=0.0)
-    np.save(layout.mean_file, mean.astype(np.float32))
-    np.save(layout.std_file, group_std(std).astype(np.float32))
-    for split, names in ids.items():
-        _write_lines(layout.split_file(split), names)
-    _write_lines(layout.split_file("train_val"), ids["train"] + ids["val"])
-    _write_lines(layout.split_file("all"), [f"{index:06d}" for index in range(clips)])
+    _write_statistics(layout, stats)
+    _write_splits(layout, ids, clips)
     (out / META_FILE).write_text(
         json.dumps(
             {"format": META_FORMAT, "actions": list(ACTIONS), "clips": meta},
@@ -246,3 +215,66 @@ def generate_humanml3d(
         subclips=subclips,
         outside_length_rule=outside,
     )
+
+
+def _clear_layout(out: Path) -> None:
+    """Remove an earlier dataset's layout entries (the folders' files, the top-level files) and
+    make the three per-clip folders."""
+    for name in LAYOUT_ENTRIES:
+        path = out / name
+        if path.is_dir():
+            for child in sorted(path.iterdir()):
+                child.unlink()
+        elif path.exists():
+            path.unlink()
+    for folder in ("new_joint_vecs", "new_joints", "texts"):
+        (out / folder).mkdir(exist_ok=True)
+
+
+def _write_clip(
+    layout: HumanML3DLayout, clip_id: str, seed: int, index: int, action: str
+) -> tuple[SynthClip, np.ndarray, bool]:
+    """Generate clip `index` and write its actor's features, joints and captions as `clip_id`.
+
+    Returns the generator clip, the (T, 263) float32 features and whether a time-tagged
+    moving line was captioned.
+    """
+    clip = generate_clip(seed=seed, index=index, action=action, vary_bodies=False)
+    motion = hml.features_from_positions(*resample(clip, clip.actor - 1))
+    features = motion.features.numpy().astype(np.float32)
+    np.save(layout.motion_file(clip_id), features)
+    np.save(layout.joints_file(clip_id), motion.joints.numpy().astype(np.float32))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, index, _CAPTION_TAG]))
+    captions = make_solo_captions(rng, action=action, side=clip.side, speed=clip.speed)
+    lines = [processed_line(caption) for caption in captions]
+    moving = _moving_line(rng, motion.joints)  # after the templates: the same caption stream
+    if moving is not None:
+        lines.append(moving)
+    _write_lines(layout.caption_file(clip_id), lines)
+    return clip, features, moving is not None
+
+
+def _moving_line(rng: np.random.Generator, joints: torch.Tensor) -> str | None:
+    """The time-tagged caption line of the (T, 22, 3) joints' :func:`moving_span`, at the
+    span's mean floor speed; None when the clip has no such span."""
+    span = moving_span(joints)
+    if span is None:
+        return None
+    step = joints[span[0] + 1 : span[1], 0] - joints[span[0] : span[1] - 1, 0]
+    speed = float(torch.linalg.vector_norm(step[:, [0, 2]], dim=-1).mean()) * hml.FPS
+    return processed_line(moving_caption(rng, speed), _seconds(span[0]), _seconds(span[1]))
+
+
+def _write_statistics(layout: HumanML3DLayout, stats: StatsAccumulator) -> None:
+    """Mean.npy and the reference's grouped Std.npy of the training split."""
+    mean, std, _ = stats.compute(min_std=0.0)
+    np.save(layout.mean_file, mean.astype(np.float32))
+    np.save(layout.std_file, group_std(std).astype(np.float32))
+
+
+def _write_splits(layout: HumanML3DLayout, ids: dict[str, list[str]], clips: int) -> None:
+    """The split files: train, val and test, train_val, and all ids."""
+    for split, names in ids.items():
+        _write_lines(layout.split_file(split), names)
+    _write_lines(layout.split_file("train_val"), ids["train"] + ids["val"])
+    _write_lines(layout.split_file("all"), [f"{index:06d}" for index in range(clips)])
