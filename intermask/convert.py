@@ -147,7 +147,7 @@ def _convert_vq(
     with open_dict(config):
         config.model.net.quantizer.stochastic_temperature = 0.5  # fidelity rows 6-7
         config.model.net.quantizer.reset = "reference"
-        if has_graph_ends(reference):  # the InterHuman release (fidelity, graph ends)
+        if has_graph_ends(reference):  # the InterHuman release: as its evaluation decodes (10b)
             config.model.net.encoder.ends = "graph_first_frame"
     net = instantiate(config.model.net)
     conversion = convert_reference_vq(reference, net.state_dict())

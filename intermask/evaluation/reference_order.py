@@ -272,10 +272,9 @@ def sampler_generation(sampler: Any, streams: Streams) -> Generate:
     def generate(caption: str, length: int) -> tuple[torch.Tensor, int]:
         with drawing_from(streams.torch):
             out = sampler([caption], torch.tensor([length]), seeds=[0])
-        # eval.py decodes each person in a call of its own. The released InterHuman tokenizer's
-        # graph ends (docs/fidelity.md, 10b) aggregate neighbours at frame 0 of the first
-        # sequence of a call only, so there both persons' frame 0 do; decoded as one batch of
-        # two, person 2's would not (up to 0.23 apart in frame 0 of every sample).
+        # eval.py decodes each person in a call of its own: so here, whatever the tokenizer's
+        # graph ends (docs/fidelity.md, 10b; with graph_batch_first_frame a batch of two would
+        # leave person 2's frame 0 without its neighbours, up to 0.23 apart).
         with torch.no_grad():
             alone = torch.cat([sampler.vq.decode_valid(out.tokens[:, p, None]) for p in (0, 1)])
             features = sampler.vq.view.denormalize(alone.float())  # (2, T, *F)

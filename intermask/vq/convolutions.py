@@ -80,7 +80,13 @@ def _to_grid(x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
     return rearrange(x, "b t j c -> b (j c) t")
 
 
-GraphEnds = Literal["conv", "graph", "graph_first_frame"]
+GraphEnds = Literal["conv", "graph", "graph_first_frame", "graph_batch_first_frame"]
+GraphFrames = Literal["all", "first", "batch_first"]  # which frames aggregate their neighbours
+_GRAPH_FRAMES: dict[str, GraphFrames] = {
+    "graph": "all",
+    "graph_first_frame": "first",
+    "graph_batch_first_frame": "batch_first",
+}
 
 
 class SkeletonGraphLayer(nn.Module):
@@ -88,14 +94,19 @@ class SkeletonGraphLayer(nn.Module):
     ``lin_l(mean over its neighbours of relu(lin(x_n))) + lin_r(x)`` (the reference's
     ``SAGEConv(project=True)``, mean aggregation, edges both ways along the kinematic chains).
 
-    ``first_frame_only`` reproduces the reference's use: it passes one skeleton's edge index for
-    a batch flattened to B x T x J nodes, so only frame 0 of sample 0 aggregates neighbours and
-    every other node gets ``lin_l.bias + lin_r(x)`` (docs/fidelity.md).
+    ``frames`` says which nodes aggregate their neighbours; the others get
+    ``lin_l.bias + lin_r(x)``. ``all``: every frame (what the reference meant). The reference
+    passes one skeleton's edge index for a call's B x T x J nodes, so only frame 0 of the call's
+    first sequence aggregates: ``batch_first`` is that, for a batch; ``first`` is frame 0 of every
+    sequence, what the reference computes for each sequence encoded or decoded alone, as its
+    evaluation does (batch 1), and does not depend on the batch (docs/fidelity.md, row 10b).
     """
 
-    def __init__(self, in_channels: int, out_channels: int, *, first_frame_only: bool) -> None:
+    def __init__(self, in_channels: int, out_channels: int, *, frames: GraphFrames) -> None:
         super().__init__()
-        self.first_frame_only = first_frame_only
+        if frames not in ("all", "first", "batch_first"):
+            raise ValueError(f"frames must be 'all', 'first' or 'batch_first', got {frames!r}")
+        self.frames = frames
         self.lin = nn.Linear(in_channels, in_channels)
         self.lin_l = nn.Linear(in_channels, out_channels)
         self.lin_r = nn.Linear(in_channels, out_channels, bias=False)
@@ -108,9 +119,12 @@ class SkeletonGraphLayer(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         nodes = rearrange(x, "b c j t -> b t j c")
         neighbours = torch.relu(self.lin(nodes))
-        if self.first_frame_only:
+        if self.frames == "batch_first":
             mean = torch.zeros_like(neighbours)
             mean[0, 0] = self.mean @ neighbours[0, 0]
+        elif self.frames == "first":
+            mean = torch.zeros_like(neighbours)
+            mean[:, 0] = torch.einsum("ij,bjc->bic", self.mean, neighbours[:, 0])
         else:
             mean = torch.einsum("ij,btjc->btic", self.mean, neighbours)
         out = self.lin_l(mean) + self.lin_r(nodes)
@@ -125,15 +139,15 @@ def _end(
     InterHuman release, docs/fidelity.md)."""
     if ends == "conv":
         return _conv(layout, in_channels, out_channels, (3, 3))
-    if ends not in ("graph", "graph_first_frame"):
-        raise ValueError(f"ends must be 'conv', 'graph' or 'graph_first_frame', got {ends!r}")
+    if ends not in _GRAPH_FRAMES:
+        raise ValueError(f"ends must be 'conv' or one of {sorted(_GRAPH_FRAMES)}, got {ends!r}")
     if layout != "2d":
         raise ValueError(f"graph ends need the 2d token layout, got {layout!r}")
-    first_frame_only = ends == "graph_first_frame"
+    frames = _GRAPH_FRAMES[ends]
     return nn.Sequential(
-        SkeletonGraphLayer(in_channels, width, first_frame_only=first_frame_only),
+        SkeletonGraphLayer(in_channels, width, frames=frames),
         nn.ReLU(),
-        SkeletonGraphLayer(width, out_channels, first_frame_only=first_frame_only),
+        SkeletonGraphLayer(width, out_channels, frames=frames),
     )
 
 

@@ -25,6 +25,7 @@ from intermask_release import (
 
 from intermask.interm.decoding import generate
 from intermask.release_options import UnsupportedOption, generator_overrides, vq_overrides
+from intermask.vq.convolutions import SkeletonGraphLayer
 
 LOGITS, DECODED = 1e-4, 1e-5  # the issue's tolerances (measured: 2.9e-6 and 6e-8)
 
@@ -40,14 +41,32 @@ def test_converted_tokenizers_encode_and_decode_as_the_authors(fixture, name, tm
     stored = fixture[name]
     ours = convert_case(name, fixture, tmp_path)
     motion, codes = stored["inputs"]["motion"], stored["inputs"]["codes"]
-    with torch.no_grad():
-        latent = ours.encoder(ours.view.to_joints(motion))
-        decoded = our_decode(ours, codes)
+    graph_layers = [m for m in ours.modules() if isinstance(m, SkeletonGraphLayer)]
+    assert len(graph_layers) == (4 if name == "vq_interhuman" else 0)
+    # the stored outputs are the authors' module on a batch of two: with graph ends, only frame
+    # 0 of the batch's first sequence aggregates there ("batch_first")
+    default = _encode_decode(ours, motion, codes)
+    for layer in graph_layers:
+        assert layer.frames == "first"  # the conversion's: each sequence as if passed alone
+        layer.frames = "batch_first"
+    latent, decoded = _encode_decode(ours, motion, codes)
     torch.testing.assert_close(latent, stored["latent"].reshape(latent.shape), rtol=0, atol=DECODED)
     torch.testing.assert_close(
         decoded, stored["decoded"].reshape(decoded.shape), rtol=0, atol=DECODED
     )
     assert float(stored["decoded"].abs().max()) > 0.5  # a tolerance that means something
+    # the default equals the authors' module given each sequence alone (the first: stored)
+    for sample in range(motion.shape[0]):
+        alone = _encode_decode(ours, motion[sample : sample + 1], codes[sample : sample + 1])
+        for mine, theirs in zip(default, alone, strict=True):
+            torch.testing.assert_close(mine[sample : sample + 1], theirs, rtol=0, atol=DECODED)
+    if graph_layers:  # and the two readings differ beyond the first sequence
+        assert float((default[1][1] - decoded[1]).abs().max()) > 1e-2
+
+
+def _encode_decode(vq, motion, codes) -> tuple[torch.Tensor, torch.Tensor]:
+    with torch.no_grad():
+        return vq.encoder(vq.view.to_joints(motion)), our_decode(vq, codes)
 
 
 @pytest.mark.parametrize("name", ["generator", "generator_8_heads"])

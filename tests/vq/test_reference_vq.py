@@ -4,6 +4,7 @@ shapes are the reference ``RVQVAE``'s module tree, written out as data."""
 
 from __future__ import annotations
 
+import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
@@ -121,8 +122,8 @@ def test_the_graph_layer_is_graphsage_and_the_reference_aggregates_one_frame():
     from intermask.vq.convolutions import SkeletonGraphLayer
 
     torch.manual_seed(0)
-    every = SkeletonGraphLayer(3, 4, first_frame_only=False)
-    first = SkeletonGraphLayer(3, 4, first_frame_only=True)
+    every = SkeletonGraphLayer(3, 4, frames="all")
+    first = SkeletonGraphLayer(3, 4, frames="batch_first")
     first.load_state_dict(every.state_dict())
     x = torch.randn(2, 3, 22, 5)  # (B, C, J, T)
     nodes = x.permute(0, 3, 2, 1)
@@ -136,6 +137,17 @@ def test_the_graph_layer_is_graphsage_and_the_reference_aggregates_one_frame():
     alone = every.lin_l.bias + every.lin_r(nodes)  # every other node: no neighbours
     torch.testing.assert_close(out[1], alone[1])
     torch.testing.assert_close(out[0, 1:], alone[0, 1:])
+    # "first": frame 0 of every sequence, what the reference gives each sequence passed alone
+    each = SkeletonGraphLayer(3, 4, frames="first")
+    each.load_state_dict(every.state_dict())
+    out = each(x).permute(0, 3, 2, 1)
+    for sample in (0, 1):
+        alone_call = first(x[sample : sample + 1]).permute(0, 3, 2, 1)[0]
+        torch.testing.assert_close(out[sample], alone_call, rtol=0, atol=1e-6)
+        torch.testing.assert_close(out[sample, 0, 4], expected[sample, 0])
+        torch.testing.assert_close(out[sample, 1:], alone[sample, 1:])
+    with pytest.raises(ValueError, match="frames must be 'all', 'first' or 'batch_first', got 'x'"):
+        SkeletonGraphLayer(3, 4, frames="x")
 
 
 def test_the_decoder_keeps_the_encoders_dilation_order_as_the_reference_does():
