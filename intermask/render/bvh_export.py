@@ -247,7 +247,7 @@ def humanml3d_offsets(positions: np.ndarray) -> np.ndarray:
     return offsets
 
 
-def _positional_ik(positions: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+def positional_ik(positions: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(T, 22, 3) positions, (22, 3) offsets -> (T, 22, 3, 3) local rotations posing the offsets
     onto the positions (module docstring: Kabsch at branching joints, swings along chains)."""
     frames = positions.shape[0]
@@ -308,7 +308,7 @@ def humanml3d_bvh_clips(
             parents=PARENTS,
             offsets=np.array(body),
             root_positions=positions[:, 0].copy(),
-            rotations=_positional_ik(positions, body),
+            rotations=positional_ik(positions, body),
             frame_time=_frame_time(fps),
         )
     ]
