@@ -4,7 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
-from conftest import known_params
+from body_builders import known_params
 
 from intermask.body.model import (
     BodyModelError,

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 import torch
-from conftest import known_params
+from body_builders import known_params
 
 from intermask.body.amass import YUP_TO_ZUP, amass_arrays, read_amass, write_amass
 from intermask.body.export import body_vertices
