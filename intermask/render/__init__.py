@@ -5,8 +5,9 @@ Inputs are joint positions ``(T, P, 22, 3)`` in metres on the SMPL 22-joint skel
 
 Modules: ``projection`` (joint validation, cameras, perspective projection), ``frames`` (PIL
 frames), ``animation`` (GIF/MP4 files), ``html_viewer`` (one-file offline viewer, its page in
-``viewer_template.html``), ``bvh`` (BVH writer/parser, forward kinematics of a file) and
-``bvh_export`` (BVH clips from the InterHuman, Inter-X and HumanML3D representations).
+``viewer_template.html``), ``bvh`` (BVH writer/parser, forward kinematics of a file),
+``bvh_export`` (BVH clips from the InterHuman, Inter-X and HumanML3D representations) and
+``gltf`` (``.glb`` files of skinned, animated characters: bodies or limb meshes).
 """
 
 from intermask.render.animation import (
@@ -29,6 +30,7 @@ from intermask.render.bvh_export import (
     write_interaction_bvh,
 )
 from intermask.render.frames import DEFAULT_STYLE, Style, person_color, render_frames
+from intermask.render.gltf import Character, limb_character, write_glb
 from intermask.render.html_viewer import ViewerSample, viewer_html, write_html_viewer
 from intermask.render.projection import VIEWS, Camera, prepare_joints
 
@@ -37,6 +39,7 @@ __all__ = [
     "VIEWS",
     "BvhClip",
     "Camera",
+    "Character",
     "Style",
     "ViewerSample",
     "bvh_joint_positions",
@@ -45,6 +48,7 @@ __all__ = [
     "humanml3d_offsets",
     "interhuman_bvh_clips",
     "interx_bvh_clips",
+    "limb_character",
     "person_color",
     "prepare_joints",
     "quantize_exact",
@@ -58,6 +62,7 @@ __all__ = [
     "viewer_html",
     "write_bvh",
     "write_gif",
+    "write_glb",
     "write_html_viewer",
     "write_interaction_bvh",
     "write_mp4",
