@@ -1,7 +1,9 @@
 """Intersection Volume (IV) and Intersection Frequency (IF) of two persons (ARFlow section 4.1).
 
-Both measure the skeleton capsule proxy of ``intermask.physics`` (no SMPL-X meshes here), so the
-numbers compare with each other, not with the ARFlow tables. The math lives in
+IntersectionVolume and IntersectionFrequency measure the skeleton capsule proxy of
+``intermask.physics``, so their numbers compare with each other, not with the ARFlow tables;
+MeshIntersectionVolume and MeshIntersectionFrequency measure the two bodies' meshes (fitted
+SMPL-H / SMPL-X bodies, ``intermask.body``), ARFlow's own definition. The math lives in
 ``intermask.physics.volume``; these classes only accumulate it. Sums are float64 states reduced by
 summation, so DDP gathers them exactly.
 """
@@ -12,6 +14,7 @@ import torch
 from torchmetrics import Metric
 
 from intermask.physics.capsules import BodyProxy
+from intermask.physics.mesh_volume import mesh_intersection_volume
 from intermask.physics.volume import (
     DEFAULT_CHUNK_VOXELS,
     DEFAULT_PITCH,
@@ -133,3 +136,46 @@ class IntersectionFrequency(_PenetrationMetric):
 
     def compute(self) -> torch.Tensor:
         return self._mean()
+
+
+class _MeshPenetration:
+    """``update`` of the mesh measures: the two bodies' meshes instead of their joints."""
+
+    pitch: float
+    chunk_voxels: int
+
+    def update(
+        self,
+        vertices_a: torch.Tensor | None = None,
+        vertices_b: torch.Tensor | None = None,
+        faces_a: torch.Tensor | None = None,
+        faces_b: torch.Tensor | None = None,
+        frame_mask: torch.Tensor | None = None,
+        *,
+        volumes: torch.Tensor | None = None,
+    ) -> None:
+        """vertices_* (B, T, V, 3) in metres, faces (F, 3) (faces_b: faces_a when None), frame_mask
+        (B, T) bool | None; or ``volumes``: the (V,) mesh intersection volumes in cm^3 of the
+        valid frames, computed elsewhere."""
+        if volumes is None:
+            if vertices_a is None or vertices_b is None or faces_a is None:
+                raise ValueError(
+                    f"{type(self).__name__}.update: give vertices_a, vertices_b and faces_a, or volumes"
+                )
+            volumes = mesh_intersection_volume(
+                vertices_a, vertices_b, faces_a, faces_b, pitch=self.pitch, frame_mask=frame_mask
+            )
+            volumes = volumes if frame_mask is None else volumes[frame_mask]
+        self._accumulate(volumes.reshape(-1))  # type: ignore[attr-defined]
+
+
+class MeshIntersectionVolume(_MeshPenetration, IntersectionVolume):
+    """Mean per-frame intersection volume in cm^3 of the two bodies' meshes (ARFlow's definition,
+    intermask.physics.mesh_volume) over valid frames.
+
+    ``update(vertices_a (B, T, V, 3), vertices_b (B, T, V', 3), faces_a (F, 3), faces_b, frame_mask)``.
+    """
+
+
+class MeshIntersectionFrequency(_MeshPenetration, IntersectionFrequency):
+    """Share in [0, 1] of valid frames whose mesh intersection volume exceeds `tolerance` cm^3."""
