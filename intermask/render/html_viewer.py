@@ -6,6 +6,13 @@ millimetres (a 4 s two-person clip at 30 fps is about 100 kB). The page plays, p
 changes speed, orbits (mouse drag) and zooms (wheel) a perspective camera, and switches between
 samples. It reports the frame it shows in ``<body data-frame>`` and the number of frames it has
 drawn in ``data-frames-drawn``, which is what the headless-browser test reads.
+
+A sample may carry meshes (``ViewerSample.characters``: fitted bodies or limb meshes, the
+:class:`intermask.render.gltf.Character` of the .glb export). The page then skins them itself
+each frame (linear blend skinning of the rest mesh by the joints' rotations, as glTF does) and
+draws them with a small z-buffer rasteriser into the canvas, flat-shaded, so interpenetration
+shows as it is; the skeleton becomes a toggle. It counts drawn mesh frames in
+``data-mesh-frames-drawn``. Embedded as integers: millimetres, quaternions and weights x 10^4.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ import numpy as np
 from intermask.motion import interhuman
 from intermask.motion.skeleton import LEFT_JOINTS, PARENTS
 from intermask.render.frames import DEFAULT_STYLE, HEAD_JOINT, Style
+from intermask.render.gltf import Character, continuous_quaternions, top_weights
 from intermask.render.projection import VIEWS, UpAxis, prepare_joints
 
 TEMPLATE = "viewer_template.html"
@@ -35,7 +43,9 @@ class ViewerSample:
     """One interaction shown in the viewer.
 
     joints: (T, P, 22, 3) or (T, 22, 3) positions in metres (numpy or torch), Y-up unless
-    up_axis="z"; reference_person: reaction mode, that person drawn grey and dashed.
+    up_axis="z"; reference_person: reaction mode, that person drawn grey and dashed;
+    characters: None, or one mesh per person (Y up, the joints' frames) drawn instead of the
+    sticks.
     """
 
     name: str
@@ -44,6 +54,45 @@ class ViewerSample:
     fps: float = float(interhuman.FPS)
     reference_person: int | None = None
     up_axis: UpAxis = "y"
+    characters: Sequence[Character] | None = None
+
+
+_FIXED = 10000  # quaternions and weights as integers x 10^4
+
+
+def _mesh_payload(
+    characters: Sequence[Character], frames: int, persons: int, where: str
+) -> list[dict[str, object]]:
+    if len(characters) != persons:
+        raise ValueError(f"{where}: {len(characters)} characters for {persons} persons")
+    bodies = []
+    for character in characters:
+        if character.rotations.shape[0] != frames:
+            raise ValueError(
+                f"{where}: character {character.name!r} has {character.rotations.shape[0]} frames, "
+                f"the joints {frames}"
+            )
+        joints, weights = top_weights(character.weights)
+
+        def millimetres(x: np.ndarray) -> list[int]:
+            return np.rint(np.asarray(x) * 1000.0).astype(np.int64).reshape(-1).tolist()
+
+        bodies.append(
+            {
+                "parents": list(character.parents),
+                "rest": millimetres(character.rest_joints),
+                "vertices": millimetres(character.vertices),
+                "faces": character.faces.astype(np.int64).reshape(-1).tolist(),
+                "skin": joints.astype(np.int64).reshape(-1).tolist(),
+                "weights": np.rint(weights * _FIXED).astype(np.int64).reshape(-1).tolist(),
+                "rotations": np.rint(continuous_quaternions(character.rotations) * _FIXED)
+                .astype(np.int64)
+                .reshape(-1)
+                .tolist(),
+                "root": millimetres(character.root_positions),
+            }
+        )
+    return bodies
 
 
 def _sample_payload(sample: ViewerSample, index: int) -> dict[str, object]:
@@ -57,6 +106,11 @@ def _sample_payload(sample: ViewerSample, index: int) -> dict[str, object]:
             f"{where}: reference_person must be in [0, {persons - 1}], got {sample.reference_person}"
         )
     millimetres = np.rint(joints * 1000.0).astype(np.int64)
+    bodies = (
+        None
+        if sample.characters is None
+        else _mesh_payload(sample.characters, int(frames), int(persons), where)
+    )
     return {
         "name": sample.name,
         "caption": sample.caption,
@@ -65,6 +119,7 @@ def _sample_payload(sample: ViewerSample, index: int) -> dict[str, object]:
         "persons": int(persons),
         "reference": sample.reference_person,
         "joints": millimetres.reshape(-1).tolist(),
+        "bodies": bodies,
     }
 
 
