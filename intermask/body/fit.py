@@ -222,9 +222,17 @@ def _fit(
     betas0 = fit_shape(model, target, settings=settings)
     start = start_pose(target, features, model.body_offsets(betas0))
     rotations0 = start.rotations.to(device=device, dtype=dtype)
-    rot6d = matrix_to_rot6d(rotations0).clone().requires_grad_(True)
-    transl = (target[:, :, 0] - model.rest_joints(betas0)[:, None, 0]).clone().requires_grad_(True)
-    betas = betas0.clone().requires_grad_(True)
+    rot6d = (
+        matrix_to_rot6d(rotations0)
+        .clone(memory_format=torch.contiguous_format)
+        .requires_grad_(True)
+    )
+    transl = (
+        (target[:, :, 0] - model.rest_joints(betas0)[:, None, 0])
+        .clone(memory_format=torch.contiguous_format)
+        .requires_grad_(True)
+    )
+    betas = betas0.clone(memory_format=torch.contiguous_format).requires_grad_(True)
 
     def loss() -> torch.Tensor:
         rotations = rot6d_to_matrix(rot6d)

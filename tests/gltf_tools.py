@@ -1,4 +1,4 @@
-"""Test helpers for .glb files: the Khronos glTF validator (npm's gltf-validator, run by node) and
+"""Test helpers for .glb files (tests/render, tests/body): the Khronos glTF validator (npm's gltf-validator, run by node) and
 glTF's own skinning, evaluated from the file, to compare with what was exported."""
 
 from __future__ import annotations

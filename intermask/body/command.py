@@ -1,0 +1,92 @@
+"""``intermask body`` (also ``python -m intermask.body``): body files for sample folders."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from intermask.body.fit import FitSettings
+from intermask.body.model import DEFAULT_BETAS, GENDERS, NUM_MODEL_JOINTS, load_body_model
+
+DESCRIPTION = (
+    "Fits one SMPL-X or SMPL-H body per person to each sample folder's joints.npy (starting from "
+    "features.npy's rotations) and writes body_person<k>.npz (AMASS style, Z up), bodies.glb "
+    "(glTF 2.0, Y up, metres, skinned), body_fit.json (per-joint error, time) and a viewer.html "
+    "with the meshes. Without --body-model, bodies.glb holds skeletons with limb meshes. The "
+    "body-model files are licensed: pass yours (docs/bodies.md says where to get them)."
+)
+
+
+def add_body_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "samples", nargs="+", type=Path, help="sample folders (joints.npy, features.npy)"
+    )
+    parser.add_argument(
+        "--body-model",
+        type=Path,
+        help="SMPL-X / SMPL-H file (SMPLX_NEUTRAL.npz, smplh/neutral/model.npz) or a folder of them",
+    )
+    parser.add_argument("--model-type", choices=tuple(NUM_MODEL_JOINTS), help="default: the file's")
+    parser.add_argument(
+        "--gender", choices=GENDERS, help="default: the file's (neutral if it says none)"
+    )
+    parser.add_argument(
+        "--betas", type=int, default=DEFAULT_BETAS, help="shape components (default 10)"
+    )
+    parser.add_argument("--device", default="cpu", help="cpu (default) or cuda")
+    parser.add_argument(
+        "--iterations",
+        type=int,
+        default=FitSettings.iterations,
+        help="L-BFGS iterations of the fit",
+    )
+    parser.add_argument(
+        "--threads", type=int, default=FitSettings.threads, help="CPU threads while fitting"
+    )
+    parser.add_argument("--no-viewer", action="store_true", help="leave viewer.html as it is")
+
+
+def run_body(args: argparse.Namespace) -> int:
+    from intermask.body.sample import body_outputs
+
+    model = None
+    if args.body_model is not None:
+        import torch
+
+        dtype = torch.float64 if args.device == "cpu" else torch.float32
+        model = load_body_model(
+            args.body_model,
+            kind=args.model_type,
+            gender=args.gender,
+            num_betas=args.betas,
+            device=args.device,
+            dtype=dtype,
+        )
+    settings = FitSettings(iterations=args.iterations, threads=args.threads)
+    for folder in args.samples:
+        paths = body_outputs(folder, model, settings=settings, viewer=not args.no_viewer)
+        written = ", ".join(path.name for path in paths.values())
+        print(f"{folder}: {written}")
+    return 0
+
+
+def add_body_parser(commands) -> None:
+    """The ``body`` sub-command of the intermask CLI."""
+    parser = commands.add_parser(
+        "body", help="SMPL-X / SMPL-H bodies and .glb exports of samples", description=DESCRIPTION
+    )
+    add_body_arguments(parser)
+    parser.set_defaults(run=run_body)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m intermask.body", description=DESCRIPTION)
+    add_body_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return run_body(args)
+    except (FileNotFoundError, ValueError) as error:  # BodyModelError is a ValueError
+        print(f"intermask body: error: {error}", file=sys.stderr)
+        return 2
