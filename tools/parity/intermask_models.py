@@ -22,6 +22,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from intermask.vq.convolutions import SkeletonGraphLayer
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 from intermask_release import (  # noqa: E402
@@ -110,14 +112,37 @@ def _vq_case(name: str, case: dict, folder: Path, record: dict) -> dict[str, flo
         decoded = net.forward_decoder(inputs["codes"])
     record[name] = {"recipe": recipe, "inputs": inputs, "latent": latent, "decoded": decoded}
     ours = convert_case(name, record, folder)
+    figures = {}
+    graph_layers = [m for m in ours.modules() if isinstance(m, SkeletonGraphLayer)]
+    if graph_layers:  # as converted (frame 0 of every sequence): theirs given each one alone
+        alone = [_encode_decode(net, ours, inputs, i, theirs=True) for i in range(2)]
+        mine = [_encode_decode(ours, ours, inputs, i, theirs=False) for i in range(2)]
+        figures["each sequence alone: latent"] = max(
+            common.max_abs(m[0], a[0].reshape(m[0].shape)) for m, a in zip(mine, alone, strict=True)
+        )
+        figures["each sequence alone: decoded"] = max(
+            common.max_abs(m[1], a[1].reshape(m[1].shape)) for m, a in zip(mine, alone, strict=True)
+        )
+        for layer in graph_layers:  # their module on a batch: the first sequence's frame 0 only
+            layer.frames = "batch_first"
     with torch.no_grad():
         our_latent = ours.encoder(ours.view.to_joints(inputs["motion"]))
         our_decoded = our_decode(ours, inputs["codes"])
     return {
+        **figures,
         "encoder latent": common.max_abs(our_latent, latent.reshape(our_latent.shape)),
         "decoded features": common.max_abs(our_decoded, decoded.reshape(our_decoded.shape)),
         "largest decoded": float(decoded.abs().max()),
     }
+
+
+def _encode_decode(net, ours, inputs, i: int, *, theirs: bool):
+    """Sequence ``i`` alone through the authors' module (``theirs``) or ours."""
+    motion, codes = inputs["motion"][i : i + 1], inputs["codes"][i : i + 1]
+    with torch.no_grad():
+        if theirs:
+            return net.encoder(net.preprocess(motion)), net.forward_decoder(codes)
+        return ours.encoder(ours.view.to_joints(motion)), our_decode(ours, codes)
 
 
 def _generator_case(name: str, case: dict, folder: Path, record: dict) -> dict[str, float]:
