@@ -9,6 +9,8 @@ it would start working:
   Hydra composes the job's config with the line's overrides (an unknown key, group or option
   fails here);
 - ``intermask ...``: the console script's parser accepts the arguments;
+- ``python -m intermask.body ...``: its parser accepts the arguments;
+- ``python tools/...``: the script exists and defines every option the line passes;
 - ``.venv-parity/bin/python tools/parity/SCRIPT ...``: the script exists and defines every
   option the line passes.
 
@@ -21,6 +23,7 @@ is the command's shape, not the user's files.
 
 from __future__ import annotations
 
+import argparse
 import re
 import shlex
 import subprocess
@@ -105,6 +108,17 @@ def _check_python(words: list[str], where: str) -> None:
     elif words[:3] == ["python", "-m", "intermask.train"]:
         assert words[3] == "--config-name", f"{where}: {words}"
         _compose(words[4], words[5:], where)
+    elif words[:3] == ["python", "-m", "intermask.body"]:
+        from intermask.body.command import add_body_arguments
+
+        parser = argparse.ArgumentParser(exit_on_error=False)
+        add_body_arguments(parser)
+        try:
+            parser.parse_args(words[3:])
+        except (argparse.ArgumentError, SystemExit) as error:
+            pytest.fail(f"{where}: python -m intermask.body refuses it ({error})")
+    elif len(words) > 1 and words[1].startswith("tools/"):
+        _check_parity(words, where)
     else:
         pytest.fail(f"{where}: a python command this test does not know how to check")
 
