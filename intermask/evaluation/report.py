@@ -19,6 +19,9 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("mpjpe_mm", "MPJPE (mm)", "↓"),
     ("iv_cm3", "IV (cm³)", "↓"),
     ("if", "IF", "↓"),
+    ("mesh_iv_cm3", "Mesh IV (cm³)", "↓"),  # on fitted SMPL-X / SMPL-H bodies (docs/bodies.md)
+    ("mesh_if", "Mesh IF", "↓"),
+    ("mesh_fit_error_mm", "Body fit (mm)", "↓"),
     ("latency_ms", "Latency (ms/sample)", "↓"),
     ("success", "Success %", "↑"),
 )
