@@ -7,7 +7,7 @@ Shape glossary used in every docstring:
 
 Stages live in sub-packages named after them: ``motion`` (representations, pure functions),
 ``data`` (readers, synthetic dataset, DataModule), ``text``, ``vq``, ``interm``, ``evaluator``,
-``metrics``, ``reaction`` and ``render``.
+``metrics``, ``reaction``, ``render`` and ``body`` (SMPL-X / SMPL-H bodies fitted to motion).
 """
 
 __version__ = "0.1.0"

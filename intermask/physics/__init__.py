@@ -5,8 +5,10 @@ frame (the proxy is rotation-invariant and the voxel lattice is invariant under 
 Y-up positions from ``intermask.motion.to_joint_positions`` and Z-up raw joints both work.
 
 Modules: ``capsules`` (the proxy and its signed distance), ``volume`` (Intersection Volume and
-Frequency, ARFlow section 4.1), ``loss`` (relu(zeta - SDF) guidance loss, ARFlow eq. 10).
-The numbers come from a skeleton proxy, not SMPL-X meshes: they compare only with each other.
+Frequency, ARFlow section 4.1), ``loss`` (relu(zeta - SDF) guidance loss, ARFlow eq. 10),
+``mesh_volume`` (the same Intersection Volume on two body meshes, ARFlow's own definition).
+The capsule numbers come from a skeleton proxy, not SMPL-X meshes: they compare only with each
+other; fitted bodies (``intermask.body``) give the mesh measure.
 """
 
 from intermask.physics.capsules import (
@@ -29,6 +31,7 @@ from intermask.physics.loss import (
     bone_sample_points,
     penetration_loss,
 )
+from intermask.physics.mesh_volume import mesh_intersection_volume
 from intermask.physics.volume import (
     DEFAULT_PITCH,
     DEFAULT_TOLERANCE,
@@ -55,6 +58,7 @@ __all__ = [
     "capsule_distances",
     "intersection_frequency",
     "intersection_volume",
+    "mesh_intersection_volume",
     "penetrating_frames",
     "penetration_loss",
     "segment_distances",
