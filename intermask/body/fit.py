@@ -97,6 +97,7 @@ class FitResult(NamedTuple):
     joints: torch.Tensor  # (P, T, 22, 3) the fitted bodies' joints
     error: torch.Tensor  # (P, T, 22) metres, |fitted - target|
     seconds: float
+    start: str  # where the rotations started (StartPose.source)
 
 
 def representation_of(features: np.ndarray | torch.Tensor) -> str:
@@ -257,7 +258,7 @@ def _fit(
         )
         fitted = model.body_joints(params.betas, rotations, params.transl)
         error = torch.linalg.vector_norm(fitted - target, dim=-1)
-    return FitResult(params, fitted, error, time.perf_counter() - started)
+    return FitResult(params, fitted, error, time.perf_counter() - started, start.source)
 
 
 def pose_error_degrees(fitted: torch.Tensor, reference: torch.Tensor) -> torch.Tensor:

@@ -95,15 +95,13 @@ def limb_characters(features: np.ndarray, fps: float) -> list[Character]:
     ]
 
 
-def fit_report(
-    fit: FitResult, model: BodyModel, *, source: str, settings: FitSettings
-) -> dict[str, Any]:
+def fit_report(fit: FitResult, model: BodyModel, *, settings: FitSettings) -> dict[str, Any]:
     """body_fit.json: the per-joint error of the fitted bodies against the sample's joints."""
     error = fit.error.double() * 1000.0  # (P, T, 22) mm
     persons, frames = error.shape[:2]
     return {
         "body_model": {"path": str(model.path), "kind": model.kind, "gender": model.gender},
-        "start": source,
+        "start": fit.start,
         "persons": persons,
         "frames": frames,
         "error_mm": {
@@ -145,12 +143,9 @@ def body_outputs(
         feature_tensor = torch.from_numpy(features).to(device=device, dtype=dtype)
         started = time.perf_counter()
         fit = fit_bodies(model, target, feature_tensor, settings=settings)
-        source = {"interhuman": "interhuman rotations", "interx": "inter-x rotations"}.get(
-            representation_of(features), "inverse kinematics of the joints"
-        )
         for k, path in enumerate(write_amass(fit.params, model, folder, fps=fps)):
             paths[f"npz{k + 1}"] = path
-        report = fit_report(fit, model, source=source, settings=settings)
+        report = fit_report(fit, model, settings=settings)
         report["seconds_with_io"] = round(time.perf_counter() - started, 3)
         paths["fit"] = folder / "body_fit.json"
         paths["fit"].write_text(json.dumps(report, indent=2) + "\n")
