@@ -164,8 +164,10 @@ def _output_folder(text: str) -> Path:
 def _generate(args: argparse.Namespace) -> int:
     from intermask import generate as gen
 
-    fields = {name: getattr(args, name) for name in gen.Request.__dataclass_fields__}
-    gen.run(gen.Request(**fields))
+    options = vars(args)
+    sampler = {name: options[name] for name in args.sampler_options if options[name] is not None}
+    fields = {name: options[name] for name in gen.Request.__dataclass_fields__ if name in options}
+    gen.run(gen.Request(**fields, sampler=sampler))
     return 0
 
 
@@ -230,10 +232,10 @@ def _add_generate_parser(commands) -> None:
         "generate",
         help="captions -> two-person interactions or one-person motions (npy, JSON, GIF, MP4, "
         "HTML)",
-        description="Defaults come from configs/generate.yaml and configs/sampler/paper.yaml. "
-        "The kind of run is read from its config.yaml: an Inter-M run generates two persons, a "
-        "MoMask masked transformer run (with --residual, its residual transformer run) one "
-        "HumanML3D person at 20 fps.",
+        description="Defaults come from configs/generate.yaml and configs/sampler/ (paper.yaml; "
+        "MoMask: momask.yaml). The kind of run is read from its config.yaml: an Inter-M run "
+        "generates two persons, a MoMask masked transformer run (with --residual, its residual "
+        "transformer run) one HumanML3D person at 20 fps.",
     )
     parser.add_argument(
         "--checkpoint",
@@ -252,60 +254,7 @@ def _add_generate_parser(commands) -> None:
     length.add_argument("--length-frames", type=_positive_int, help="length in frames")
     parser.add_argument("--samples", type=_positive_int, help="samples per caption (default 1)")
     parser.add_argument("--seed", type=int, help="first seed (default 0)")
-    parser.add_argument(
-        "--cfg-scale",
-        type=_non_negative_float,
-        help="classifier-free guidance scale (2; MoMask: the masked transformer's, 4)",
-    )
-    parser.add_argument(
-        "--residual-cfg-scale",
-        type=_non_negative_float,
-        help="MoMask: the residual transformer's guidance scale (5)",
-    )
-    parser.add_argument(
-        "--iterations",
-        type=_positive_int,
-        help="decoding iterations (20; reaction 12; MoMask 10)",
-    )
-    parser.add_argument(
-        "--schedule",
-        choices=("paper", "reference"),
-        help="re-masking counts: the paper's (default) or the reference code's (docs/fidelity.md)",
-    )
-    parser.add_argument(
-        "--noise",
-        choices=("per_sample", "reference"),
-        help="sampling draws: one generator per sample (default) or the reference code's",
-    )
-    parser.add_argument(
-        "--persons",
-        choices=("together", "in_turn"),
-        help="both persons every pass (default, the paper) or person A first, then B given A",
-    )
-    parser.add_argument(
-        "--revisits",
-        type=_non_negative_int,
-        help="in_turn only: extra turns that re-decode A given B, then B given the new A (0)",
-    )
-    parser.add_argument(
-        "--partner-scale",
-        type=_non_negative_float,
-        help="in_turn or --reaction: partner guidance, how much further a person follows what "
-        "the other's tokens add to its prediction (0, the paper)",
-    )
-    parser.add_argument(
-        "--remask-noise",
-        type=_non_negative_float,
-        help="re-mask by log confidence plus Gumbel noise of this scale, fading over the "
-        "iterations (MaskGIT; 0, the paper)",
-    )
-    parser.add_argument("--top-k", type=_ratio, help="top-k ratio of codes kept, in (0, 1] (0.1)")
-    parser.add_argument("--temperature", type=_positive_float, help="sampling temperature (1)")
-    parser.add_argument(
-        "--residual-temperature",
-        type=_non_negative_float,
-        help="MoMask: the residual layers' sampling temperature (0: greedy, the default)",
-    )
+    sampler_options = _add_decoding_options(parser)
     parser.add_argument("--batch-size", type=_positive_int, help="samples per forward batch (32)")
     parser.add_argument(
         "--fps", type=_positive_float, help="frame rate of the dataset (30; MoMask 20)"
@@ -327,7 +276,77 @@ def _add_generate_parser(commands) -> None:
         "--out", type=_output_folder, help="output folder (default outputs/generate)"
     )
     parser.add_argument("--no-render", action="store_true", help="write arrays and JSON only")
-    parser.set_defaults(run=_generate)
+    parser.set_defaults(run=_generate, sampler_options=sampler_options)
+
+
+def _add_decoding_options(parser: argparse.ArgumentParser) -> tuple[str, ...]:
+    """The decoding settings of ``intermask generate`` -> their names, the keys of the sampler
+    configs (configs/sampler/; ``--cfg-scale`` is MoMask's ``mask_cfg_scale``)."""
+    add = parser.add_argument
+    options = [
+        add(
+            "--cfg-scale",
+            type=_non_negative_float,
+            help="classifier-free guidance scale (2; MoMask: the masked transformer's, 4)",
+        ),
+        add(
+            "--residual-cfg-scale",
+            type=_non_negative_float,
+            help="MoMask: the residual transformer's guidance scale (5)",
+        ),
+        add(
+            "--iterations",
+            type=_positive_int,
+            help="decoding iterations (20; reaction 12; MoMask 10)",
+        ),
+        add(
+            "--schedule",
+            choices=("paper", "reference"),
+            help="re-masking counts: the paper's (default) or the reference code's "
+            "(docs/fidelity.md)",
+        ),
+        add(
+            "--noise",
+            choices=("per_sample", "reference"),
+            help="sampling draws: one generator per sample (default) or the reference code's",
+        ),
+        add(
+            "--persons",
+            choices=("together", "in_turn"),
+            help="both persons every pass (default, the paper) or person A first, then B given A",
+        ),
+        add(
+            "--revisits",
+            type=_non_negative_int,
+            help="in_turn only: extra turns that re-decode A given B, then B given the new A (0)",
+        ),
+        add(
+            "--partner-scale",
+            type=_non_negative_float,
+            help="in_turn or --reaction: partner guidance, how much further a person follows "
+            "what the other's tokens add to its prediction (0, the paper)",
+        ),
+        add(
+            "--remask-noise",
+            type=_non_negative_float,
+            help="re-mask by log confidence plus Gumbel noise of this scale, fading over the "
+            "iterations (MaskGIT; 0, the paper)",
+        ),
+        add(
+            "--top-k",
+            dest="top_k_ratio",
+            metavar="TOP_K",
+            type=_ratio,
+            help="top-k ratio of codes kept, in (0, 1] (0.1)",
+        ),
+        add("--temperature", type=_positive_float, help="sampling temperature (1)"),
+        add(
+            "--residual-temperature",
+            type=_non_negative_float,
+            help="MoMask: the residual layers' sampling temperature (0: greedy, the default)",
+        ),
+    ]
+    return tuple(option.dest for option in options)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -107,16 +107,19 @@ def _momask_rows(cfg: DictConfig, device, checkpoints) -> list[MotionSource]:
     the base layer alone ("MoMask (base)"), and base + residual layers ("MoMask") when
     ``residual_ckpt`` is given. Both generated rows draw the same base tokens per batch."""
     from intermask.momask.load import load_momask_sampler
-    from intermask.momask.sampler import MoMaskSampler
+    from intermask.momask.sampler import MoMaskDecoding, MoMaskSampler
 
     if not cfg.mask_ckpt:
         raise ValueError(
             "mode=text_to_motion needs mask_ckpt=<masked transformer run> (and residual_ckpt=<"
             "residual transformer run> for the full MoMask row)"
         )
-    settings = OmegaConf.to_container(cfg.momask)
+    settings = MoMaskDecoding(**OmegaConf.to_container(cfg.momask))
     full, paths = load_momask_sampler(
-        cfg.mask_ckpt, cfg.residual_ckpt or None, vq_checkpoint=cfg.vq_ckpt or None, **settings
+        cfg.mask_ckpt,
+        cfg.residual_ckpt or None,
+        vq_checkpoint=cfg.vq_ckpt or None,
+        settings=settings,
     )
     for role, path in paths.items():
         checkpoints[role] = f"{path} ({file_hash(path)})"
@@ -126,7 +129,11 @@ def _momask_rows(cfg: DictConfig, device, checkpoints) -> list[MotionSource]:
     if full.residual_net is not None:
         full.residual_net.to(device)
     base = MoMaskSampler(
-        mask_net=full.mask_net, residual_net=None, vq=full.vq.to(device), text=full.text, **settings
+        mask_net=full.mask_net,
+        residual_net=None,
+        vq=full.vq.to(device),
+        text=full.text,
+        settings=settings,
     )
 
     def rows_of(sampler: MoMaskSampler):
@@ -148,6 +155,7 @@ def _momask_rows(cfg: DictConfig, device, checkpoints) -> list[MotionSource]:
 
 
 def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[MotionSource]:
+    from intermask.interm.decoding import Decoding
     from intermask.interm.load import load_generator
     from intermask.interm.sampler import InteractionSampler
 
@@ -161,7 +169,7 @@ def _intermask_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Mo
         net=generator.net.to(device),
         vq=generator.vq.to(device),
         text=generator.text,
-        **OmegaConf.to_container(cfg.sampler),
+        settings=Decoding(**OmegaConf.to_container(cfg.sampler)),
         cuda_graphs=cfg.cuda_graphs,
         precision=precision.precision,
     )
@@ -226,8 +234,8 @@ def measured(cfg: DictConfig, source: MotionSource, *, latency: bool = True) -> 
     )
 
 
-def evaluate(cfg: DictConfig) -> dict[str, Any]:
-    """Run the protocol of ``cfg`` -> the result dictionary (also written to the run folder)."""
+def _check_config(cfg: DictConfig) -> str:
+    """The mode, order and penetration modes of ``cfg``, checked -> the order."""
     if cfg.mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {cfg.mode!r}")
     order = cfg.get("order", "batched")
@@ -241,6 +249,44 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     unknown = sorted(set(cfg.penetration.modes) - set(MODES))
     if unknown:
         raise ValueError(f"penetration.modes: unknown mode(s) {unknown}; expected some of {MODES}")
+    return order
+
+
+def _header(cfg: DictConfig, order: str, replications: int, evaluator, checkpoints, success):
+    """What the results record besides the rows: the data, the checkpoints and the settings."""
+    sampler = cfg.momask if cfg.mode == "text_to_motion" else cfg.sampler
+    arflow = "arflow" in checkpoints
+    return {
+        "mode": cfg.mode,
+        "order": order,
+        "dataset": f"{cfg.data.dataset} ({cfg.data.root})",
+        "split": cfg.split,
+        "replications": replications,
+        "fast": bool(cfg.fast),
+        "evaluator": f"{evaluator.name} ({cfg.eval_ckpt}, sha256 {evaluator.file_hash})",
+        **checkpoints,
+        "sampler": dict(OmegaConf.to_container(sampler)),
+        **({"arflow_sampling": dict(OmegaConf.to_container(cfg.arflow))} if arflow else {}),
+        "penetration": dict(OmegaConf.to_container(cfg.penetration)),
+        "success_thresholds": asdict(success),
+    }
+
+
+def _load_evaluator(cfg: DictConfig, device: torch.device):
+    from intermask.evaluator import load_evaluator
+
+    released = cfg.get("released_evaluator") or {}
+    return load_evaluator(
+        cfg.eval_ckpt,
+        glove_dir=released.get("glove_dir"),
+        meta_dir=released.get("meta_dir"),
+        net=_released_interclip(released.get("interclip")),
+    ).to(device)
+
+
+def evaluate(cfg: DictConfig) -> dict[str, Any]:
+    """Run the protocol of ``cfg`` -> the result dictionary (also written to the run folder)."""
+    order = _check_config(cfg)
     output_dir = Path(cfg.paths.output_dir)
     write_run_record(output_dir, cfg, extra={"job": cfg.task_name})
     constants: ProtocolConstants = instantiate(cfg.protocol)
@@ -252,15 +298,7 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     datamodule = instantiate(cfg.data, eval_batch_size=constants.eval_batch_size)
     datamodule.prepare_data()
     datamodule.setup("test" if cfg.split == "test" else "validate")
-    from intermask.evaluator import load_evaluator
-
-    released = cfg.get("released_evaluator") or {}
-    evaluator = load_evaluator(
-        cfg.eval_ckpt,
-        glove_dir=released.get("glove_dir"),
-        meta_dir=released.get("meta_dir"),
-        net=_released_interclip(released.get("interclip")),
-    ).to(device)
+    evaluator = _load_evaluator(cfg, device)
     sources, checkpoints = build_sources(cfg, datamodule.normalizer, device)
 
     def loader(epoch: int) -> Iterator[dict[str, Any]]:
@@ -285,27 +323,8 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     )
     if order == "reference":
         runner = _reference_order_loop(cfg, datamodule, evaluator, sources[0], constants)
-    header = {
-        "mode": cfg.mode,
-        "order": order,
-        "dataset": f"{cfg.data.dataset} ({cfg.data.root})",
-        "split": cfg.split,
-        "replications": replications,
-        "fast": bool(cfg.fast),
-        "evaluator": f"{evaluator.name} ({cfg.eval_ckpt}, sha256 {evaluator.file_hash})",
-        **checkpoints,
-        "sampler": dict(
-            OmegaConf.to_container(cfg.momask if cfg.mode == "text_to_motion" else cfg.sampler)
-        ),
-        **(
-            {"arflow_sampling": dict(OmegaConf.to_container(cfg.arflow))}
-            if "arflow" in checkpoints
-            else {}
-        ),
-        "penetration": dict(OmegaConf.to_container(cfg.penetration)),
-        "success_thresholds": asdict(success_thresholds),
-        "device": str(device),
-    }
+    header = _header(cfg, order, replications, evaluator, checkpoints, success_thresholds)
+    header["device"] = str(device)
     start = time.process_time()
     result = runner.run(header)
     # CPU seconds of the protocol itself (models and data already loaded; all threads)

@@ -120,22 +120,36 @@ def test_vq_ablations_are_config_selections(experiment, persons, rows):
 def test_decoding_defaults_shared_by_generate_and_eval_say_the_same():
     """Facts stated in two job configs (and MoMask's in its sampler's defaults) must agree:
     a reaction decodes in the paper's 12 iterations (appendix C) whether generated or
-    evaluated, and MoMask decodes with section 4's settings in both jobs."""
+    evaluated, and MoMask decodes with section 4's settings in both jobs, stated once in
+    configs/sampler/momask.yaml, which both compose."""
     import inspect
+    from dataclasses import asdict
 
     from intermask.evaluation.sources import InterMaskReaction
-    from intermask.momask.sampler import MoMaskSampler
+    from intermask.momask.sampler import MoMaskDecoding, decode_base, decode_residual
 
     generate, evaluate = _compose("generate", []), _compose("eval", [])
     assert generate.reaction_iterations == evaluate.reaction.iterations == 12
     # the evaluation source has no default of its own: the config is the one owner
     iterations = inspect.signature(InterMaskReaction).parameters["iterations"]
     assert iterations.default is inspect.Parameter.empty
-    momask = {k: v for k, v in generate.momask.items() if k != "fps"}
-    assert momask == dict(evaluate.momask)
-    sampler_defaults = {
-        name: p.default
-        for name, p in inspect.signature(MoMaskSampler).parameters.items()
-        if p.default is not inspect.Parameter.empty
+    momask = _compose("sampler/momask", []).sampler  # a group config sits under its group
+    assert dict(generate.momask) == dict(evaluate.momask) == dict(momask)
+    # the library's defaults (callers that change single settings decode with the rest)
+    library = MoMaskDecoding()
+    assert asdict(library) == dict(momask)
+    assert list(MoMaskDecoding.__dataclass_fields__) == list(momask)
+    base = inspect.signature(decode_base).parameters
+    residual = inspect.signature(decode_residual).parameters
+    assert {k: base[k].default for k in ("iterations", "top_k_ratio", "temperature")} == {
+        k: getattr(library, k) for k in ("iterations", "top_k_ratio", "temperature")
     }
-    assert sampler_defaults == momask
+    assert (base["cfg_scale"].default, base["schedule"].default, base["noise"].default) == (
+        library.mask_cfg_scale,
+        library.schedule,
+        library.noise,
+    )
+    assert (residual["cfg_scale"].default, residual["temperature"].default) == (
+        library.residual_cfg_scale,
+        library.residual_temperature,
+    )

@@ -297,7 +297,8 @@ def test_the_generate_command_reaches_the_logits_through_each_module_once(
         # the recording stands in for interm/model.py's forward, the next and last stop; on a
         # CPU the graphed forward runs it eagerly
         assert visits == [
-            "cli.py", "generate.py", "interm/sampler.py", "interm/decoding.py", "interm/graphs.py"
+            "cli.py", "generate/__init__.py", "generate/interm.py", "interm/sampler.py",
+            "interm/decoding.py", "interm/graphs.py",
         ]  # fmt: skip
 
 
@@ -306,7 +307,9 @@ def test_the_generate_job_runs_from_python_as_from_the_command_line(runs, tmp_pa
 
     request = Request(checkpoint=str(runs["gen"]), text=["they hug"], samples=2, seconds=1.0)
     folders = run(
-        Request(**{**request.__dict__, "iterations": 1, "no_render": True, "out": tmp_path})
+        Request(
+            **{**request.__dict__, "sampler": {"iterations": 1}, "no_render": True, "out": tmp_path}
+        )
     )
     assert [f.name for f in folders] == ["they_hug_00-00", "they_hug_00-01"]
     records = [json.loads((f / "sample.json").read_text()) for f in folders]

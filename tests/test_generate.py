@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -11,6 +12,8 @@ import torch
 
 from intermask import generate as gen
 from intermask.cli import main
+from intermask.generate import interm as interm_job
+from intermask.interm.decoding import Decoding
 from intermask.vq.views import InterHumanView
 
 
@@ -129,3 +132,26 @@ def test_cli_refuses_a_file_as_output_folder(tmp_path, capsys):
         main([*argv, "--out", str(target)])
     assert f"{target} exists and is not a folder" in capsys.readouterr().err
     assert target.read_text() == "keep me"
+
+
+def test_an_inter_m_job_decodes_with_the_config_and_the_settings_given():
+    """The sampler config whole (a reaction: its own iterations), the settings given replacing
+    single keys; a rule they break is said in the options' words, before any work."""
+    defaults = gen.default_settings()
+    paper = Decoding(**defaults["sampler"])
+    assert interm_job.decoding(gen.Request(checkpoint="run"), defaults) == paper
+    given = gen.Request(checkpoint="run", reaction="a.npy", sampler={"cfg_scale": 3.0})
+    assert interm_job.decoding(given, defaults) == replace(paper, iterations=12, cfg_scale=3.0)
+    refused = {
+        "--revisits 2 needs --persons in_turn, got 'together'": {"revisits": 2},
+        "--partner-scale 1.0 needs --persons in_turn or --reaction (one person decoded beside "
+        "the other's tokens), got --persons together": {"partner_scale": 1.0},
+        "--remask-noise 1.0 draws each sample's noise from its own seed; it needs --noise "
+        "per_sample, got --noise reference": {"remask_noise": 1.0, "noise": "reference"},
+    }
+    for message, sampler in refused.items():
+        with pytest.raises(ValueError) as error:
+            interm_job.decoding(gen.Request(checkpoint="run", sampler=sampler), defaults)
+        assert str(error.value) == message
+    reaction = gen.Request(checkpoint="run", reaction="a.npy", sampler={"partner_scale": 1.0})
+    assert interm_job.decoding(reaction, defaults).partner_scale == 1.0

@@ -13,8 +13,11 @@ from hydra.utils import instantiate
 
 from intermask import generate as gen
 from intermask.cli import main
+from intermask.generate import momask as momask_job
 from intermask.momask.load import load_momask_sampler
+from intermask.momask.sampler import MoMaskDecoding
 from intermask.motion import humanml3d as hml
+from intermask.utils.files import file_hash
 from intermask.utils.fingerprint import weights_digest
 from tests.momask.momask_tiny import (
     CODES,
@@ -153,9 +156,9 @@ def test_the_record_names_the_checkpoints_settings_and_rate(runs, tmp_path, caps
             "schedule": "paper",
             "noise": "per_sample",
         },
-        "mask": {"path": str(last["mask"]), "sha256": gen.file_hash(last["mask"])},
-        "residual": {"path": str(last["residual"]), "sha256": gen.file_hash(last["residual"])},
-        "vq": {"path": str(last["vq"]), "sha256": gen.file_hash(last["vq"])},
+        "mask": {"path": str(last["mask"]), "sha256": file_hash(last["mask"])},
+        "residual": {"path": str(last["residual"]), "sha256": file_hash(last["residual"])},
+        "vq": {"path": str(last["vq"]), "sha256": file_hash(last["vq"])},
         "text_encoder": record["text_encoder"],
     }
     assert "intermask-tiny-text" in record["text_encoder"]
@@ -214,8 +217,8 @@ def test_renders_show_the_one_person_at_20_fps(runs, tmp_path, capsys):
 
 
 def test_the_defaults_are_momask_s_humanml3d_settings():
-    defaults = gen.default_settings()["momask"]
-    assert defaults == {
+    defaults = gen.default_settings()
+    assert defaults["momask"] == {
         "iterations": 10,
         "mask_cfg_scale": 4.0,
         "residual_cfg_scale": 5.0,
@@ -224,10 +227,14 @@ def test_the_defaults_are_momask_s_humanml3d_settings():
         "residual_temperature": 0.0,
         "schedule": "paper",
         "noise": "per_sample",
-        "fps": float(hml.FPS),
     }
-    settings = gen.momask_settings(gen.Request(checkpoint="run"), gen.default_settings())
-    assert settings == gen.MoMaskSettings(**defaults)
+    assert defaults["momask_fps"] == float(hml.FPS)
+    settings = momask_job.settings(gen.Request(checkpoint="run"), defaults)
+    assert settings == momask_job.Settings(MoMaskDecoding(**defaults["momask"]), float(hml.FPS))
+    given = gen.Request(checkpoint="run", sampler={"cfg_scale": 3.0, "iterations": 4}, fps=25.0)
+    assert momask_job.settings(given, defaults) == momask_job.Settings(
+        MoMaskDecoding(**{**defaults["momask"], "mask_cfg_scale": 3.0, "iterations": 4}), 25.0
+    )
     assert gen.MAX_FRAMES["humanml3d"] == 196
 
 
@@ -279,7 +286,9 @@ def test_run_kinds_are_checked(runs, tmp_path):
         "transformer run (its model is intermask.interm.module.InterMModule)"
     )
     with pytest.raises(ValueError, match="^--residual-temperature applies to MoMask runs only"):
-        gen.run(gen.Request(checkpoint=interm, residual_temperature=1.0, text=[CAPTION]))
+        gen.run(
+            gen.Request(checkpoint=interm, sampler={"residual_temperature": 1.0}, text=[CAPTION])
+        )
     with pytest.raises(ValueError) as error:
         gen.run(gen.Request(checkpoint=residual, text=[CAPTION]))
     assert str(error.value) == (
@@ -301,7 +310,7 @@ def test_captions_and_lengths_are_checked_before_loading(runs, tmp_path, monkeyp
     def never(*args, **kwargs):
         raise AssertionError("the networks were loaded")
 
-    monkeypatch.setattr(gen, "load_momask_sampler", never)
+    monkeypatch.setattr(momask_job, "load_momask_sampler", never)
     mask = str(runs["mask"])
     with pytest.raises(ValueError, match=r"give captions with --text or --prompts \(one of them\)"):
         gen.run(gen.Request(checkpoint=mask, out=tmp_path))

@@ -4,43 +4,26 @@ evaluation compose holds the library's defaults."""
 from __future__ import annotations
 
 import re
+from dataclasses import asdict
 from pathlib import Path
 
+import pytest
 from hydra import compose, initialize_config_dir
 
 from intermask import generate
 from intermask.data.synthetic.scene import FPS
-from intermask.interm.decoding import (
-    CFG_SCALE,
-    ITERATIONS,
-    NOISE,
-    PARTNER_SCALE,
-    PERSONS,
-    REMASK_NOISE,
-    REVISITS,
-    SCHEDULE,
-    TEMPERATURE,
-    TOP_K_RATIO,
-)
+from intermask.interm.decoding import Decoding, SettingsError
+from intermask.momask.sampler import MoMaskDecoding
 from intermask.train import CONFIG_DIR
 
-LIBRARY = {
-    "iterations": ITERATIONS,
-    "cfg_scale": CFG_SCALE,
-    "top_k_ratio": TOP_K_RATIO,
-    "temperature": TEMPERATURE,
-    "schedule": SCHEDULE,
-    "noise": NOISE,
-    "persons": PERSONS,
-    "revisits": REVISITS,
-    "partner_scale": PARTNER_SCALE,
-    "remask_noise": REMASK_NOISE,
-}
+# the one code statement of the defaults, Decoding's fields: the library's callers that change
+# single settings (the training module's samples, `make bench`) decode with the rest of these
+LIBRARY = asdict(Decoding())
 
 
 def test_generate_and_eval_compose_the_library_defaults():
+    assert list(Decoding.__dataclass_fields__) == list(generate.default_settings()["sampler"])
     assert generate.default_settings()["sampler"] == LIBRARY
-    assert {k: getattr(generate.Settings(), k) for k in LIBRARY} == LIBRARY
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         paper = compose("eval", overrides=["eval_ckpt=x.ckpt"])
         demo = compose("eval", overrides=["eval_ckpt=x.ckpt", "experiment=eval_demo"])
@@ -56,6 +39,7 @@ def test_generate_and_eval_compose_the_library_defaults():
         "revisits": 2,
         "remask_noise": 2.0,
     }
+    assert asdict(Decoding(**demo.sampler)) == dict(demo.sampler)  # the demo's rules hold
 
 
 def test_demo_samples_are_decoded_as_the_demo_table():
@@ -72,3 +56,30 @@ def test_demo_samples_are_decoded_as_the_demo_table():
     assert int(flags["revisits"]) == demo.sampler.revisits
     assert float(flags["remask-noise"]) == demo.sampler.remask_noise
     assert round(float(flags["seconds"]) * FPS) == demo.data.max_length  # the crops' frames
+
+
+def test_the_settings_check_their_rules_when_made():
+    """Each family's settings refuse a value out of range or two that do not go together when
+    they are made, with the messages the decoding gave; the rules that need the model or the
+    request are checked where those are known."""
+    refused = {
+        "iterations must be at least 1, got 0": {"iterations": 0},
+        "remask_noise (1.0) draws each sample's noise from its own seed; it needs "
+        "noise='per_sample', got 'reference'": {"remask_noise": 1.0, "noise": "reference"},
+        "revisits must be >= 0 and needs persons='in_turn', got 1 with 'together'": {"revisits": 1},
+        "schedule must be one of ('paper', 'reference'), got 'x'": {"schedule": "x"},
+    }
+    for message, changes in refused.items():
+        with pytest.raises(SettingsError) as error:
+            Decoding(**changes)
+        assert str(error.value) == message
+    together = Decoding(partner_scale=1.0)  # fine for a reaction, not for an interaction
+    together.check_for(modeling="collaborative", reaction=True)
+    with pytest.raises(SettingsError, match=r"partner_scale \(1.0\) needs one person decoded"):
+        together.check_for(modeling=None, reaction=False)
+    with pytest.raises(SettingsError, match=r"revisits \(1\) re-decode a collaborative model"):
+        Decoding(persons="in_turn", revisits=1).check_for(modeling="alternative", reaction=False)
+    with pytest.raises(ValueError, match=r"schedule must be one of .* and noise one of"):
+        MoMaskDecoding(noise="global")
+    with pytest.raises(ValueError, match="residual_temperature must be >= 0, got -1"):
+        MoMaskDecoding(residual_temperature=-1)

@@ -37,7 +37,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from dataclasses import dataclass, replace
+from typing import Any, NamedTuple
 
 import torch
 
@@ -45,19 +46,132 @@ from intermask.interm.masking import cosine_schedule, lowest_ranks, scheduled_co
 from intermask.interm.model import InterMOutput, InterMTransformer, TextFeatures
 from intermask.interm.tokens import step_padding_mask
 
-ITERATIONS = 20  # I, interaction generation (section 3.3); reaction: 12 (paper), 10 (reference)
-CFG_SCALE = 2.0  # s, classifier-free guidance scale (appendix C.1)
-TOP_K_RATIO = 0.1  # keep the ceil(0.1 * K) largest logits (reference topk_filter_thres=0.9)
-TEMPERATURE = 1.0  # sampling temperature of the kept logits
-SCHEDULE = "paper"  # re-masking counts: "paper" (eq. 3, ceil) or "reference" (MoMask's code)
-SCHEDULES = ("paper", "reference")
-NOISE = "per_sample"  # "per_sample" (each sample its own generator) or "reference" (see generate)
-NOISES = ("per_sample", "reference")
-PERSONS = "together"  # "together" (section 3.3: both persons each pass) or "in_turn" (see generate)
-PERSON_ORDERS = ("together", "in_turn")
-REVISITS = 0  # in-turn decoding: later turns that re-decode one person given the other
-PARTNER_SCALE = 0.0  # partner guidance: g in ``+ g * (cond - cond with the partner hidden)``
-REMASK_NOISE = 0.0  # t of the re-masking noise (MaskGIT): Gumbel noise of scale t (1 - (i + 1) / I)
+SCHEDULES = ("paper", "reference")  # re-masking counts: eq. 3 (ceil) or MoMask's code
+NOISES = ("per_sample", "reference")  # each sample its own generator, or the reference's draws
+PERSON_ORDERS = ("together", "in_turn")  # both persons each pass (section 3.3), or A then B
+
+
+class SettingsError(ValueError):
+    """A decoding setting out of its range, or two that do not go together. ``rule`` names the
+    check, so that a caller that spells the settings otherwise (``intermask generate``'s
+    options) can say the same in its own words."""
+
+    def __init__(self, rule: str, message: str) -> None:
+        super().__init__(message)
+        self.rule = rule
+
+
+@dataclass(frozen=True)
+class Decoding:
+    """Inter-M's decoding settings: one field per key of ``configs/sampler/paper.yaml``, whose
+    values are these defaults, the paper's inference settings (section 3.3, appendix C.1;
+    tests/test_sampler_settings.py keeps the two equal). ``intermask generate``, the evaluation
+    and the training module's samples build one and pass it whole to the sampler and
+    :func:`generate`. Construction checks each range and the rules between the settings;
+    :meth:`check_for` the rules that also depend on the model and the request.
+
+    Attributes:
+        iterations: I, one forward pass each; for an alternative-modeling model I_alter, the
+            rounds per person (A then B in each round, one pass per person).
+        cfg_scale: s in ``uncond + s * (cond - uncond)`` on logits.
+        top_k_ratio: sampling keeps the ``ceil(ratio * K)`` largest logits (the reference's
+            ``topk_filter_thres=0.9`` keeps 10%).
+        temperature: logits are divided by it before sampling (the reference divides the
+            probabilities, which ``Categorical`` renormalises away); 0 is greedy decoding.
+        schedule: how many tokens each iteration re-masks: "paper" (the module docstring) or
+            "reference" (the reference code's counts).
+        noise: "per_sample" (each sample's draws from its own seed: results independent of the
+            batch) or "reference": one generator seeded with ``seeds[0]`` draws every position of
+            the batch in the reference's order (``torch.multinomial``), so that with the
+            reference schedule and the same seed the reference's tokens come out; a sample then
+            depends on its batch.
+        persons: "together" (the paper: both persons in every pass) or "in_turn": ``iterations``
+            passes for person A with B all [MASK], then ``iterations`` for B given A (2I passes;
+            the module docstring says why). An alternative-modeling model always decodes in turn.
+        revisits: with ``persons="in_turn"``, this many more turns after B's: person A's
+            generated tokens are all [MASK]ed and decoded again given B's finished tokens, then
+            B's given the new A, alternating (``iterations`` passes each). The first turn of A
+            saw no B; a revisit sees it (docs/decisions.md: sampler.revisits). 0 is plain in-turn
+            decoding.
+        partner_scale: g of partner guidance (:func:`partner_guided_logits`), for passes that
+            decode one person beside the other's fixed tokens: in-turn decoding's turns after
+            the first (B's turn and every revisit; the first too where an edit fixes some of
+            B's tokens), and reaction generation (B beside the fixed A). Each such pass runs
+            one more copy of the batch. 0 (the paper) is plain guidance.
+        remask_noise: t >= 0; with t > 0 each iteration ranks the sampled codes for re-masking
+            by their log confidence plus Gumbel noise of scale ``t (1 - (i + 1) / I)`` drawn from
+            the sample's own seed (MaskGIT's randomised re-masking); 0 (the paper) ranks by the
+            confidence alone. Needs ``noise="per_sample"``.
+    """
+
+    iterations: int = 20  # I, interactions (section 3.3); reactions: 12 (configs: reaction)
+    cfg_scale: float = 2.0  # s (appendix C.1)
+    top_k_ratio: float = 0.1
+    temperature: float = 1.0
+    schedule: str = "paper"
+    noise: str = "per_sample"
+    persons: str = "together"
+    revisits: int = 0
+    partner_scale: float = 0.0
+    remask_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.iterations < 1:
+            raise SettingsError(
+                "iterations", f"iterations must be at least 1, got {self.iterations}"
+            )
+        if self.temperature < 0:
+            raise SettingsError("temperature", f"temperature must be >= 0, got {self.temperature}")
+        if not self.remask_noise >= 0:  # NaN too
+            raise SettingsError(
+                "remask_noise_range", f"remask_noise must be >= 0, got {self.remask_noise}"
+            )
+        if self.remask_noise and self.noise != "per_sample":
+            raise SettingsError(
+                "remask_noise",
+                f"remask_noise ({self.remask_noise}) draws each sample's noise from its own "
+                f"seed; it needs noise='per_sample', got {self.noise!r}",
+            )
+        for name, choices in (
+            ("schedule", SCHEDULES),
+            ("noise", NOISES),
+            ("persons", PERSON_ORDERS),
+        ):
+            if getattr(self, name) not in choices:
+                raise SettingsError(
+                    name, f"{name} must be one of {choices}, got {getattr(self, name)!r}"
+                )
+        if self.revisits < 0 or (self.revisits > 0 and self.persons != "in_turn"):
+            raise SettingsError(
+                "revisits_range" if self.revisits < 0 else "revisits",
+                f"revisits must be >= 0 and needs persons='in_turn', got {self.revisits} with "
+                f"{self.persons!r}",
+            )
+
+    def check_for(self, *, modeling: str | None, reaction: bool) -> None:
+        """The rules that also depend on the model (``modeling``: "collaborative" or
+        "alternative"; None while it is not known) and on the request (``reaction``: person A
+        is fixed)."""
+        alternately = "decodes the persons alternately (modeling='alternative')"
+        if self.revisits and modeling == "alternative":  # its rounds interleave the persons
+            raise SettingsError(
+                "revisits_alternative",
+                f"revisits ({self.revisits}) re-decode a collaborative model's turns; this model "
+                f"{alternately}: use revisits=0",
+            )
+        if self.partner_scale and modeling == "alternative":
+            raise SettingsError(
+                "partner_scale_alternative",
+                f"partner_scale ({self.partner_scale}) guides a collaborative model's passes; "
+                f"this model {alternately}: use partner_scale=0",
+            )
+        if self.partner_scale and self.persons != "in_turn" and not reaction:
+            raise SettingsError(
+                "partner_scale",
+                f"partner_scale ({self.partner_scale}) needs one person decoded beside the "
+                "other's fixed tokens: persons='in_turn' or reference_tokens, got "
+                f"persons={self.persons!r}",
+            )
 
 
 # a drop-in for InterMTransformer.forward_with_condition(tokens_a, tokens_b, condition, lengths)
@@ -303,33 +417,30 @@ def _partner(tokens: torch.Tensor, person: int, model: InterMTransformer) -> tor
     return partner
 
 
-class _Settings(NamedTuple):
+class _Call(NamedTuple):
+    """What every pass of one :func:`generate` call reads."""
+
+    settings: Decoding
     condition: torch.Tensor | None  # (B, D), None = null condition only
     null: torch.Tensor  # (B, D)
     lengths_in_steps: torch.Tensor  # (B,)
-    cfg_scale: float
-    top_k_ratio: float
-    temperature: float
     generators: list[torch.Generator]
-    schedule: str = SCHEDULE
-    noise: str = NOISE
-    partner_scale: float = PARTNER_SCALE
     forward: Forward | None = None  # None: model.forward_with_condition
-    remask_noise: float = REMASK_NOISE
 
 
 def _sample(
-    logits: torch.Tensor, settings: _Settings, active: torch.Tensor | None = None
+    logits: torch.Tensor, call: _Call, active: torch.Tensor | None = None
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """(B, ..., T', K) guided logits -> sampled codes and the probability of each under the
     guided logits before top-k and temperature (as in the reference), both (B, ..., T')."""
+    settings = call.settings
     filtered = top_k_filter(logits, settings.top_k_ratio)
     if settings.noise == "reference" and settings.temperature > 0:
-        sampled = reference_draw(filtered, settings.generators[0], settings.temperature)
+        sampled = reference_draw(filtered, call.generators[0], settings.temperature)
         confidence = logits.float().softmax(-1).gather(-1, sampled[..., None])[..., 0]
         return sampled, confidence
     sampled = sample_codes(
-        filtered, settings.lengths_in_steps, settings.generators, settings.temperature, active
+        filtered, call.lengths_in_steps, call.generators, settings.temperature, active
     )
     confidence = logits.float().log_softmax(-1).gather(-1, sampled[..., None])[..., 0].exp()
     return sampled, confidence
@@ -337,20 +448,20 @@ def _sample(
 
 def _remask_scores(
     confidence: torch.Tensor,
-    settings: _Settings,
+    call: _Call,
     iteration: int,
     iterations: int,
     active: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """The scores :func:`remask` ranks after iteration ``iteration`` (0-based): the confidence
-    itself, or with ``settings.remask_noise`` t > 0 its log plus Gumbel noise of scale
+    itself, or with ``remask_noise`` t > 0 its log plus Gumbel noise of scale
     ``t (1 - (i + 1) / I)`` from each sample's own generator (MaskGIT's randomised re-masking:
     early iterations keep some codes other than the most confident ones; docs/decisions.md:
     sampler.remask_noise)."""
-    scale = settings.remask_noise * (1 - (iteration + 1) / iterations)
+    scale = call.settings.remask_noise * (1 - (iteration + 1) / iterations)
     if scale == 0:
         return confidence
-    noise = _gumbel(confidence, settings.lengths_in_steps, settings.generators, active, time_dim=-1)
+    noise = _gumbel(confidence, call.lengths_in_steps, call.generators, active, time_dim=-1)
     return confidence.log() + scale * noise
 
 
@@ -398,52 +509,76 @@ def remask(
     return lowest_ranks(scores, count) & undecided
 
 
+def _collaborative_logits(
+    model: InterMTransformer, tokens: torch.Tensor, partner: torch.Tensor | None, call: _Call
+) -> torch.Tensor:
+    """One guided pass over both persons; with ``partner`` (B, 2, rows, T') codes, partner
+    guidance hides them in one more copy of the batch."""
+    settings = call.settings
+    if partner is not None:
+        return partner_guided_logits(
+            model,
+            tokens,
+            partner,
+            call.condition,
+            call.null,
+            call.lengths_in_steps,
+            settings.cfg_scale,
+            settings.partner_scale,
+            forward=call.forward,
+        )
+    return guided_logits(
+        model,
+        tokens,
+        call.condition,
+        call.null,
+        call.lengths_in_steps,
+        settings.cfg_scale,
+        forward=call.forward,
+    )
+
+
 def _decode_collaborative(
     model: InterMTransformer,
     tokens: torch.Tensor,
     undecided: torch.Tensor,
-    iterations: int,
-    settings: _Settings,
+    call: _Call,
     partner_person: int | None = None,
 ) -> torch.Tensor:
     """Both persons in every pass (section 3.3): (B, 2, rows, T') -> (B, 2, rows, T').
 
     ``partner_person``: the person whose fixed codes the partner-guidance pass hides
-    (:func:`partner_guided_logits`), when ``settings.partner_scale`` is not 0; None: no such pass.
+    (:func:`partner_guided_logits`), when ``partner_scale`` is not 0; None: no such pass.
     """
+    iterations, schedule = call.settings.iterations, call.settings.schedule
     n_generated = undecided.flatten(1).sum(1)  # (B,)
     partner = None
-    if partner_person is not None and settings.partner_scale != 0:
+    if partner_person is not None and call.settings.partner_scale != 0:
         partner = _partner(tokens, partner_person, model)
-    partnered = partner is not None and bool(partner.any())
+        partner = partner if bool(partner.any()) else None
     for i in range(iterations):
-        if partnered:
-            logits = partner_guided_logits(
-                model,
-                tokens,
-                partner,
-                settings.condition,
-                settings.null,
-                settings.lengths_in_steps,
-                settings.cfg_scale,
-                settings.partner_scale,
-                forward=settings.forward,
-            )
-        else:
-            logits = guided_logits(
-                model,
-                tokens,
-                settings.condition,
-                settings.null,
-                settings.lengths_in_steps,
-                settings.cfg_scale,
-                forward=settings.forward,
-            )
-        sampled, confidence = _sample(logits, settings)
+        logits = _collaborative_logits(model, tokens, partner, call)
+        sampled, confidence = _sample(logits, call)
         tokens = torch.where(undecided, sampled, tokens)
-        scores = _remask_scores(confidence, settings, i, iterations)
-        undecided = remask(scores, undecided, n_generated, i, iterations, settings.schedule)
+        scores = _remask_scores(confidence, call, i, iterations)
+        undecided = remask(scores, undecided, n_generated, i, iterations, schedule)
         tokens = tokens.masked_fill(undecided, model.vocabulary.mask_id)
+    return tokens
+
+
+def _decode_in_turn(
+    model: InterMTransformer, tokens: torch.Tensor, undecided: torch.Tensor, call: _Call
+) -> torch.Tensor:
+    """Person A, then B given A, then ``revisits`` more turns, each a collaborative decoding of
+    one person beside the other: (B, 2, rows, T') -> same. B's undecided tokens stay [MASK]
+    while A is decoded; a revisit masks one person's generated tokens again and decodes them
+    given the other's."""
+    for turn in range(2 + call.settings.revisits):
+        own = undecided.clone()
+        own[:, 1 - turn % 2] = False
+        if bool(own.any()):
+            tokens = tokens.masked_fill(own, model.vocabulary.mask_id)
+            tokens = _decode_collaborative(model, tokens, own, call, partner_person=1 - turn % 2)
     return tokens
 
 
@@ -451,10 +586,10 @@ def _decode_alternative(
     model: InterMTransformer,
     tokens: torch.Tensor,
     undecided: torch.Tensor,
-    iterations: int,
-    settings: _Settings,
+    call: _Call,
 ) -> torch.Tensor:
     """One person per pass, A then B in each round (appendix E): (B, 2, rows, T') -> same."""
+    iterations, schedule = call.settings.iterations, call.settings.schedule
     n_generated = undecided.flatten(2).sum(2)  # (B, 2)
     persons = [tokens[:, 0], tokens[:, 1]]
     pending = [undecided[:, 0], undecided[:, 1]]
@@ -467,22 +602,36 @@ def _decode_alternative(
                 model,
                 torch.stack(persons, dim=1),
                 person,
-                settings.condition,
-                settings.null,
-                settings.lengths_in_steps,
-                settings.cfg_scale,
+                call.condition,
+                call.null,
+                call.lengths_in_steps,
+                call.settings.cfg_scale,
             )
             # a sample with nothing of this person left draws no noise, so that its result does
             # not depend on whether other samples of the batch forced this pass
             active = todo.flatten(1).any(1)
-            sampled, confidence = _sample(logits, settings, active=active)
+            sampled, confidence = _sample(logits, call, active=active)
             own = torch.where(todo, sampled, persons[person])
-            scores = _remask_scores(confidence, settings, i, iterations, active)
-            pending[person] = remask(
-                scores, todo, n_generated[:, person], i, iterations, settings.schedule
-            )
+            scores = _remask_scores(confidence, call, i, iterations, active)
+            pending[person] = remask(scores, todo, n_generated[:, person], i, iterations, schedule)
             persons[person] = own.masked_fill(pending[person], model.vocabulary.mask_id)
     return torch.stack(persons, dim=1)
+
+
+def _decode(
+    model: InterMTransformer,
+    tokens: torch.Tensor,
+    undecided: torch.Tensor,
+    call: _Call,
+    reaction: bool,
+) -> torch.Tensor:
+    """The decoding the model and settings ask for: alternate persons (alternative modeling),
+    in turn, or both persons together (``reaction``: B beside the fixed A)."""
+    if model.modeling == "alternative":
+        return _decode_alternative(model, tokens, undecided, call)
+    if call.settings.persons == "in_turn":
+        return _decode_in_turn(model, tokens, undecided, call)
+    return _decode_collaborative(model, tokens, undecided, call, 0 if reaction else None)
 
 
 @torch.no_grad()
@@ -491,21 +640,13 @@ def generate(
     text: TextFeatures | tuple | None,
     lengths_in_steps: torch.Tensor,
     *,
+    settings: Decoding | None = None,
     steps: int | None = None,
-    iterations: int = ITERATIONS,
-    cfg_scale: float = CFG_SCALE,
-    top_k_ratio: float = TOP_K_RATIO,
-    temperature: float = TEMPERATURE,
     seeds: torch.Tensor | Sequence[int] | None = None,
     reference_tokens: torch.Tensor | None = None,
     edit: Edit | None = None,
-    schedule: str = SCHEDULE,
-    noise: str = NOISE,
-    persons: str = PERSONS,
-    revisits: int = REVISITS,
-    partner_scale: float = PARTNER_SCALE,
     forward: Forward | None = None,
-    remask_noise: float = REMASK_NOISE,
+    **changes: Any,
 ) -> torch.Tensor:
     """Text (and optionally fixed tokens) -> (B, 2, rows, T') generated codes, -1 on padding.
 
@@ -514,85 +655,25 @@ def generate(
             from the null condition only (no guidance), e.g. reaction without text.
         lengths_in_steps: (B,) clip lengths in token steps; ``steps`` (T') defaults to the
             longest (or the width of the given tokens).
-        iterations: I, one forward pass each; for an alternative-modeling model I_alter, the
-            rounds per person (A then B in each round, one pass per person).
-        cfg_scale: s in ``uncond + s * (cond - uncond)`` on logits.
-        top_k_ratio: sampling keeps the ``ceil(ratio * K)`` largest logits.
-        temperature: logits are divided by it before sampling (the reference divides the
-            probabilities, which ``Categorical`` renormalises away); 0 is greedy decoding.
+        settings: the :class:`Decoding` settings (None: the paper's); ``changes`` replace
+            single ones (``iterations=6``), checked as the whole is.
         seeds: (B,) one seed per sample; a sample's result depends only on its own seed,
-            text, length and fixed tokens, not on the other samples of the batch.
+            text, length and fixed tokens, not on the other samples of the batch (unless
+            ``noise="reference"``).
         reference_tokens: (B, rows, T') person A's codes for reaction generation; A stays
             fixed and only person B is generated (alternative modeling: B's passes only).
         edit: :class:`Edit` for inpainting: only ``edit.region`` changes.
-        schedule: how many tokens each iteration re-masks: "paper" (the module docstring) or
-            "reference" (the reference code's counts).
-        noise: "per_sample" (each sample's draws from its own seed: results independent of the
-            batch) or "reference": one generator seeded with ``seeds[0]`` draws every position of
-            the batch in the reference's order (``torch.multinomial``), so that with the
-            reference schedule and the same seed the reference's tokens come out; a sample then
-            depends on its batch.
-        persons: "together" (the paper: both persons in every pass) or "in_turn": ``iterations``
-            passes for person A with B all [MASK], then ``iterations`` for B given A (2I passes;
-            the module docstring says why). An alternative-modeling model always decodes in turn.
-        revisits: with ``persons="in_turn"``, this many more turns after B's: person A's
-            generated tokens are all [MASK]ed and decoded again given B's finished tokens, then
-            B's given the new A, alternating (``iterations`` passes each). The first turn of A
-            saw no B; a revisit sees it (docs/decisions.md: sampler.revisits). 0 is plain in-turn
-            decoding.
-        partner_scale: g of partner guidance (:func:`partner_guided_logits`), for passes that
-            decode one person beside the other's fixed tokens: in-turn decoding's turns after
-            the first (B's turn and every revisit; the first too where an edit fixes some of
-            B's tokens), and reaction generation (B beside the fixed A). Each such pass runs
-            one more copy of the batch. 0 (the paper) is plain guidance.
         forward: what runs the collaborative passes in place of ``model.forward_with_condition``
             (same arguments and result), e.g. a :class:`~intermask.interm.graphs.GraphedForward`
             that keeps its CUDA graphs from one call to the next. Alternative modeling's passes
             stay eager.
-        remask_noise: t >= 0; with t > 0 each iteration ranks the sampled codes for re-masking
-            by their log confidence plus Gumbel noise of scale ``t (1 - (i + 1) / I)`` drawn from
-            the sample's own seed (MaskGIT's randomised re-masking); 0 (the paper) ranks by the
-            confidence alone. Needs ``noise="per_sample"``.
 
     The confidence of a sampled code is its probability under the guided logits before top-k
     and temperature (as in the reference).
     """
-    if iterations < 1:
-        raise ValueError(f"iterations must be at least 1, got {iterations}")
-    if temperature < 0:
-        raise ValueError(f"temperature must be >= 0, got {temperature}")
-    if not remask_noise >= 0:  # NaN too
-        raise ValueError(f"remask_noise must be >= 0, got {remask_noise}")
-    if remask_noise and noise != "per_sample":
-        raise ValueError(
-            f"remask_noise ({remask_noise}) draws each sample's noise from its own seed; it needs "
-            f"noise='per_sample', got {noise!r}"
-        )
-    if schedule not in SCHEDULES:
-        raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
-    if noise not in NOISES:
-        raise ValueError(f"noise must be one of {NOISES}, got {noise!r}")
-    if persons not in PERSON_ORDERS:
-        raise ValueError(f"persons must be one of {PERSON_ORDERS}, got {persons!r}")
-    if revisits < 0 or (revisits > 0 and persons != "in_turn"):
-        raise ValueError(
-            f"revisits must be >= 0 and needs persons='in_turn', got {revisits} with {persons!r}"
-        )
-    if revisits and model.modeling == "alternative":  # its rounds interleave the persons
-        raise ValueError(
-            f"revisits ({revisits}) re-decode a collaborative model's turns; this model decodes "
-            "the persons alternately (modeling='alternative'): use revisits=0"
-        )
-    if partner_scale and model.modeling == "alternative":
-        raise ValueError(
-            f"partner_scale ({partner_scale}) guides a collaborative model's passes; this model "
-            "decodes the persons alternately (modeling='alternative'): use partner_scale=0"
-        )
-    if partner_scale and persons != "in_turn" and reference_tokens is None:
-        raise ValueError(
-            f"partner_scale ({partner_scale}) needs one person decoded beside the other's fixed "
-            f"tokens: persons='in_turn' or reference_tokens, got persons={persons!r}"
-        )
+    settings = replace(settings or Decoding(), **changes)
+    reaction = reference_tokens is not None
+    settings.check_for(modeling=model.modeling, reaction=reaction)
     for given in (reference_tokens, None if edit is None else edit.tokens):
         if given is not None and steps is None:
             steps = given.shape[-1]
@@ -601,7 +682,7 @@ def generate(
     valid = ~step_padding_mask(lengths_in_steps, steps)[:, None, None, :]  # (B, 1, 1, T')
     valid = valid.expand(batch, 2, model.rows, steps)
     tokens, undecided = _start(model, valid, reference_tokens, edit)
-    drawn = temperature > 0 or remask_noise > 0
+    drawn = settings.temperature > 0 or settings.remask_noise > 0
     generators = _generators(seeds, batch, device) if drawn else []
 
     was_training = model.training
@@ -609,38 +690,8 @@ def generate(
     try:
         condition = None if text is None else model.encode_condition(text)
         null = null_condition(model, batch, device)
-        settings = _Settings(
-            condition,
-            null,
-            lengths_in_steps,
-            cfg_scale,
-            top_k_ratio,
-            temperature,
-            generators,
-            schedule,
-            noise,
-            partner_scale,
-            forward,
-            remask_noise,
-        )
-        if model.modeling == "alternative":
-            tokens = _decode_alternative(model, tokens, undecided, iterations, settings)
-        elif persons == "in_turn":
-            # B's undecided tokens stay [MASK] while A is decoded; a revisit masks one person's
-            # generated tokens again and decodes them given the other's
-            for turn in range(2 + revisits):
-                own = undecided.clone()
-                own[:, 1 - turn % 2] = False
-                if bool(own.any()):
-                    tokens = tokens.masked_fill(own, model.vocabulary.mask_id)
-                    tokens = _decode_collaborative(
-                        model, tokens, own, iterations, settings, partner_person=1 - turn % 2
-                    )
-        else:
-            reaction = reference_tokens is not None  # B beside the fixed A
-            tokens = _decode_collaborative(
-                model, tokens, undecided, iterations, settings, 0 if reaction else None
-            )
+        call = _Call(settings, condition, null, lengths_in_steps, generators, forward)
+        tokens = _decode(model, tokens, undecided, call, reaction)
     finally:
         model.train(was_training)
     return tokens.masked_fill(~valid, -1)

@@ -7,25 +7,13 @@ the evaluation protocol share, so the three can never decode differently.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple
+from dataclasses import replace
+from typing import Any, NamedTuple
 
 import torch
 from einops import rearrange
 
-from intermask.interm.decoding import (
-    CFG_SCALE,
-    ITERATIONS,
-    NOISE,
-    PARTNER_SCALE,
-    PERSONS,
-    REMASK_NOISE,
-    REVISITS,
-    SCHEDULE,
-    TEMPERATURE,
-    TOP_K_RATIO,
-    Edit,
-    generate,
-)
+from intermask.interm.decoding import Decoding, Edit, generate
 from intermask.interm.graphs import GraphedForward
 from intermask.interm.model import InterMTransformer, TextFeatures
 from intermask.text.cache import TextFeatureCache
@@ -84,14 +72,14 @@ def checked_steps(
 class InteractionSampler:
     """Batched generation with a trained Inter-M Transformer and its frozen VQ-VAE.
 
-    ``iterations``, ``cfg_scale``, ``top_k_ratio``, ``temperature``, ``schedule``, ``noise``,
-    ``persons``, ``revisits``, ``partner_scale`` and ``remask_noise`` default to the paper's inference settings
-    (section 3.3, appendix C.1). ``cuda_graphs``: on a CUDA device, each shape of decoding pass
-    is captured once as a CUDA graph and replayed (:mod:`intermask.interm.graphs`; the same
-    kernels, so the same tokens); it does nothing elsewhere. ``precision``: ``32-true`` (the
-    default) or ``bf16-mixed``, which runs the decoding passes and the VQ decoding under bf16
-    autocast on the sampler's device. bf16 changes the numbers (other codes win near ties), so it
-    is a choice the caller makes and labels; the outputs are fp32 either way.
+    ``settings``: the :class:`~intermask.interm.decoding.Decoding` settings, whole (None: the
+    paper's, section 3.3 and appendix C.1); ``changes`` replace single ones (``iterations=5``).
+    ``cuda_graphs``: on a CUDA device, each shape of decoding pass is captured once as a CUDA
+    graph and replayed (:mod:`intermask.interm.graphs`; the same kernels, so the same tokens); it
+    does nothing elsewhere. ``precision``: ``32-true`` (the default) or ``bf16-mixed``, which runs
+    the decoding passes and the VQ decoding under bf16 autocast on the sampler's device. bf16
+    changes the numbers (other codes win near ties), so it is a choice the caller makes and
+    labels; the outputs are fp32 either way.
     """
 
     def __init__(
@@ -100,18 +88,10 @@ class InteractionSampler:
         net: InterMTransformer,
         vq: MotionVQVAE,
         text: TextFeatureCache,
-        iterations: int = ITERATIONS,
-        cfg_scale: float = CFG_SCALE,
-        top_k_ratio: float = TOP_K_RATIO,
-        temperature: float = TEMPERATURE,
-        schedule: str = SCHEDULE,
-        noise: str = NOISE,
-        persons: str = PERSONS,
-        revisits: int = REVISITS,
-        partner_scale: float = PARTNER_SCALE,
-        remask_noise: float = REMASK_NOISE,
+        settings: Decoding | None = None,
         cuda_graphs: bool = True,
         precision: str = FP32,
+        **changes: Any,
     ) -> None:
         if precision not in PRECISIONS:
             raise ValueError(
@@ -119,12 +99,14 @@ class InteractionSampler:
                 f"intermask.utils.precision.resolve_precision), got {precision!r}"
             )
         self.net, self.vq, self.text = net, vq, text
+        self.settings = replace(settings or Decoding(), **changes)
         self.precision = precision
         self.forward = GraphedForward(net, enabled=cuda_graphs)
-        self.iterations, self.cfg_scale = iterations, cfg_scale
-        self.top_k_ratio, self.temperature, self.schedule = top_k_ratio, temperature, schedule
-        self.noise, self.persons, self.revisits = noise, persons, revisits
-        self.partner_scale, self.remask_noise = partner_scale, remask_noise
+
+    @property
+    def noise(self) -> str:
+        """The settings' noise (the reference-order evaluation needs ``reference``)."""
+        return self.settings.noise
 
     @property
     def device(self) -> torch.device:
@@ -157,24 +139,19 @@ class InteractionSampler:
         lengths: (B,) frames; rounded down to a multiple of 4 (at least 4).
         seeds: (B,) one per sample (reproducible and independent of the batch).
         reference_tokens / edit: reaction (person A fixed) and inpainting, see :func:`generate`.
+        iterations: in place of the settings' (a reaction's 12, appendix C).
         """
         steps = checked_steps(captions, lengths, self.device)
         text = None if captions is None else self.text_features(captions)
+        settings = (
+            self.settings if iterations is None else replace(self.settings, iterations=iterations)
+        )
         with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.precision == BF16):
             tokens = generate(
                 self.net,
                 text,
                 steps,
-                iterations=iterations or self.iterations,
-                cfg_scale=self.cfg_scale,
-                top_k_ratio=self.top_k_ratio,
-                temperature=self.temperature,
-                schedule=self.schedule,
-                noise=self.noise,
-                persons=self.persons,
-                revisits=self.revisits,
-                partner_scale=self.partner_scale,
-                remask_noise=self.remask_noise,
+                settings=settings,
                 seeds=seeds,
                 reference_tokens=reference_tokens,
                 edit=edit,

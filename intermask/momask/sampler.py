@@ -28,16 +28,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import torch
 from torch import nn
 
 from intermask.interm.decoding import (
-    NOISE,
     NOISES,
-    SCHEDULE,
     SCHEDULES,
     reference_draw,
     remask,
@@ -50,12 +49,17 @@ from intermask.momask.model import MaskedTransformer, ResidualTransformer, sente
 from intermask.text.cache import TextFeatureCache
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 
+# MoMask's decoding settings (section 4, HumanML3D): the defaults of :class:`MoMaskDecoding` and
+# of the networks' own decoders, :func:`decode_base` and :func:`decode_residual`; the same numbers
+# as configs/sampler/momask.yaml (tests/test_configs.py keeps them equal)
 ITERATIONS = 10  # L (section 4, figure 7)
 MASK_CFG_SCALE = 4.0  # s of the masked transformer on HumanML3D (section 4; KIT-ML: 2)
 RESIDUAL_CFG_SCALE = 5.0  # s of the residual transformer (section 4)
 TOP_K_RATIO = 0.1  # reference top_k filter_thres 0.9
 TEMPERATURE = 1.0  # base-layer sampling temperature (reference)
 RESIDUAL_TEMPERATURE = 0.0  # greedy residual layers (ours; the reference samples at 1)
+SCHEDULE = "paper"  # base-layer re-masking: paper | reference (docs/fidelity.md row 4)
+NOISE = "per_sample"  # per_sample | reference: the authors' draw order (row 4b)
 
 
 def classifier_free_guidance(
@@ -108,11 +112,52 @@ def _runner(
     return run
 
 
-def _check_settings(temperature: float, top_k_ratio: float) -> None:
+def _check_settings(temperature: float, top_k_ratio: float, name: str = "temperature") -> None:
     if temperature < 0:
-        raise ValueError(f"temperature must be >= 0, got {temperature}")
+        raise ValueError(f"{name} must be >= 0, got {temperature}")
     if not 0.0 < top_k_ratio <= 1.0:
         raise ValueError(f"top_k_ratio must lie in (0, 1], got {top_k_ratio}")
+
+
+def _check_base(iterations: int, schedule: str, noise: str) -> None:
+    if iterations < 1:
+        raise ValueError(f"iterations must be at least 1, got {iterations}")
+    if schedule not in SCHEDULES or noise not in NOISES:
+        raise ValueError(
+            f"schedule must be one of {SCHEDULES} and noise one of {NOISES}, got {schedule!r} "
+            f"and {noise!r}"
+        )
+
+
+@dataclass(frozen=True)
+class MoMaskDecoding:
+    """MoMask's decoding settings: one field per key of ``configs/sampler/momask.yaml`` (which
+    ``intermask generate`` and the evaluation compose as ``momask``), whose values are these
+    defaults. Construction checks them as :func:`decode_base` and :func:`decode_residual` do.
+
+    Attributes:
+        iterations: L, the base layer's forward passes.
+        mask_cfg_scale, residual_cfg_scale: each transformer's guidance (module docstring).
+        top_k_ratio: both layers' top-k filter.
+        temperature, residual_temperature: the base and residual layers' sampling temperatures
+            (0: greedy).
+        schedule, noise: the base layer's re-masking and noise (:func:`decode_base`); both
+            "reference" decode a converted release seed for seed as the authors' code does.
+    """
+
+    iterations: int = ITERATIONS
+    mask_cfg_scale: float = MASK_CFG_SCALE
+    residual_cfg_scale: float = RESIDUAL_CFG_SCALE
+    top_k_ratio: float = TOP_K_RATIO
+    temperature: float = TEMPERATURE
+    residual_temperature: float = RESIDUAL_TEMPERATURE
+    schedule: str = SCHEDULE
+    noise: str = NOISE
+
+    def __post_init__(self) -> None:
+        _check_base(self.iterations, self.schedule, self.noise)
+        _check_settings(self.temperature, self.top_k_ratio)
+        _check_settings(self.residual_temperature, self.top_k_ratio, "residual_temperature")
 
 
 def _text_or_null(text: torch.Tensor | None, batch: int, dim: int, device) -> torch.Tensor:
@@ -183,13 +228,7 @@ def decode_base(
             batch per pass, in order, from ``generator`` (the first, given one per sample), as
             the authors' loop draws after ``torch.manual_seed`` (row 4b).
     """
-    if iterations < 1:
-        raise ValueError(f"iterations must be at least 1, got {iterations}")
-    if schedule not in SCHEDULES or noise not in NOISES:
-        raise ValueError(
-            f"schedule must be one of {SCHEDULES} and noise one of {NOISES}, got {schedule!r} "
-            f"and {noise!r}"
-        )
+    _check_base(iterations, schedule, noise)
     _check_settings(temperature, top_k_ratio)
     batch_generator = generator[0] if isinstance(generator, Sequence) else generator
     device = next(net.parameters()).device
@@ -284,10 +323,8 @@ class MoMaskSampler:
             ("MoMask (base)" in Table 1).
         vq: the residual VQ-VAE both were trained on (one token row).
         text: feature cache in front of the frozen text encoder.
-        iterations, mask_cfg_scale, residual_cfg_scale, top_k_ratio, temperature,
-            residual_temperature: the decoding settings (module docstring).
-        schedule, noise: the base layer's re-masking and noise (:func:`decode_base`); both
-            "reference" decode a converted release seed for seed as the authors' code does.
+        settings: the :class:`MoMaskDecoding` settings, whole (None: section 4's); ``changes``
+            replace single ones (``iterations=4``).
     """
 
     def __init__(
@@ -297,14 +334,8 @@ class MoMaskSampler:
         residual_net: ResidualTransformer | None,
         vq: MotionVQVAE,
         text: TextFeatureCache,
-        iterations: int = ITERATIONS,
-        mask_cfg_scale: float = MASK_CFG_SCALE,
-        residual_cfg_scale: float = RESIDUAL_CFG_SCALE,
-        top_k_ratio: float = TOP_K_RATIO,
-        temperature: float = TEMPERATURE,
-        residual_temperature: float = RESIDUAL_TEMPERATURE,
-        schedule: str = SCHEDULE,
-        noise: str = NOISE,
+        settings: MoMaskDecoding | None = None,
+        **changes: Any,
     ) -> None:
         if vq.token_rows != 1:
             raise ValueError(
@@ -323,10 +354,7 @@ class MoMaskSampler:
                 f"{layers}"
             )
         self.mask_net, self.residual_net, self.vq, self.text = mask_net, residual_net, vq, text
-        self.iterations, self.top_k_ratio = iterations, top_k_ratio
-        self.mask_cfg_scale, self.residual_cfg_scale = mask_cfg_scale, residual_cfg_scale
-        self.temperature, self.residual_temperature = temperature, residual_temperature
-        self.schedule, self.noise = schedule, noise
+        self.settings = replace(settings or MoMaskDecoding(), **changes)
 
     @property
     def device(self) -> torch.device:
@@ -350,17 +378,18 @@ class MoMaskSampler:
         own generator only)."""
         steps = checked_steps(captions, lengths, self.device)
         text = None if captions is None else self.sentence(captions)
+        settings = self.settings
         base = decode_base(
             self.mask_net,
             text,
             steps,
-            iterations=self.iterations,
-            cfg_scale=self.mask_cfg_scale,
-            top_k_ratio=self.top_k_ratio,
-            temperature=self.temperature,
+            iterations=settings.iterations,
+            cfg_scale=settings.mask_cfg_scale,
+            top_k_ratio=settings.top_k_ratio,
+            temperature=settings.temperature,
             generator=generator,
-            schedule=self.schedule,
-            noise=self.noise,
+            schedule=settings.schedule,
+            noise=settings.noise,
         )
         if self.residual_net is None:
             layers = self.vq.quantizer.num_quantizers
@@ -372,9 +401,9 @@ class MoMaskSampler:
                 base,
                 text,
                 steps,
-                cfg_scale=self.residual_cfg_scale,
-                temperature=self.residual_temperature,
-                top_k_ratio=self.top_k_ratio,
+                cfg_scale=settings.residual_cfg_scale,
+                temperature=settings.residual_temperature,
+                top_k_ratio=settings.top_k_ratio,
                 generator=generator,
             )
         return tokens[:, :, None, :]

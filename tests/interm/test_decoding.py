@@ -429,18 +429,15 @@ def test_remask_noise_keeps_the_schedule_and_each_sample_its_own_draws(tiny, mon
 def test_remask_noise_ranks_by_log_confidence_plus_fading_gumbel_noise():
     """Iteration i of I adds t (1 - (i + 1) / I) g to log p, g drawn from the sample's own
     generator over its own steps: no noise after the last iteration."""
-    from intermask.interm.decoding import _remask_scores, _Settings
+    from intermask.interm.decoding import Decoding, _Call, _remask_scores
 
     confidence = torch.tensor([[0.5, 0.25, 0.125]])
-    settings = _Settings(
+    settings = _Call(
+        settings=Decoding(cfg_scale=1.0, top_k_ratio=1.0, temperature=1.0, remask_noise=2.0),
         condition=None,
         null=torch.zeros(1, 4),
         lengths_in_steps=torch.tensor([3]),
-        cfg_scale=1.0,
-        top_k_ratio=1.0,
-        temperature=1.0,
         generators=[torch.Generator().manual_seed(7)],
-        remask_noise=2.0,
     )
     scores = _remask_scores(confidence, settings, 0, 4)
     uniform = torch.rand(1, 3, generator=torch.Generator().manual_seed(7))
