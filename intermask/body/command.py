@@ -48,28 +48,78 @@ def add_body_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-viewer", action="store_true", help="leave viewer.html as it is")
 
 
-def run_body(args: argparse.Namespace) -> int:
+def write_bodies(
+    folders: Sequence[Path],
+    *,
+    body_model: Path | None,
+    kind: str | None = None,
+    gender: str | None = None,
+    betas: int = DEFAULT_BETAS,
+    device: str = "cpu",
+    settings: FitSettings | None = None,
+    viewer: bool = True,
+) -> None:
+    """Body files for each sample folder (intermask.body.sample.body_outputs), one line each."""
     from intermask.body.sample import body_outputs
 
     model = None
-    if args.body_model is not None:
+    if body_model is not None:
         import torch
 
-        dtype = torch.float64 if args.device == "cpu" else torch.float32
         model = load_body_model(
-            args.body_model,
-            kind=args.model_type,
-            gender=args.gender,
-            num_betas=args.betas,
-            device=args.device,
-            dtype=dtype,
+            body_model,
+            kind=kind,
+            gender=gender,
+            num_betas=betas,
+            device=device,
+            dtype=torch.float64 if device == "cpu" else torch.float32,
         )
-    settings = FitSettings(iterations=args.iterations, threads=args.threads)
-    for folder in args.samples:
-        paths = body_outputs(folder, model, settings=settings, viewer=not args.no_viewer)
-        written = ", ".join(path.name for path in paths.values())
-        print(f"{folder}: {written}")
+    for folder in folders:
+        paths = body_outputs(folder, model, settings=settings, viewer=viewer)
+        print(f"{folder}: {', '.join(path.name for path in paths.values())}")
+
+
+def run_body(args: argparse.Namespace) -> int:
+    write_bodies(
+        args.samples,
+        body_model=args.body_model,
+        kind=args.model_type,
+        gender=args.gender,
+        betas=args.betas,
+        device=args.device,
+        settings=FitSettings(iterations=args.iterations, threads=args.threads),
+        viewer=not args.no_viewer,
+    )
     return 0
+
+
+def add_generate_body_options(parser: argparse.ArgumentParser) -> None:
+    """``intermask generate``'s body options: with --body-model, each sample folder also gets
+    its bodies (write_bodies)."""
+    parser.add_argument(
+        "--body-model",
+        type=Path,
+        help="SMPL-X / SMPL-H file or folder: also write body_person<k>.npz, bodies.glb, "
+        "body_fit.json and a viewer with the meshes (docs/bodies.md)",
+    )
+    parser.add_argument(
+        "--body-model-type", choices=tuple(NUM_MODEL_JOINTS), help="default: the file's"
+    )
+    parser.add_argument("--body-gender", choices=GENDERS, help="default: the file's")
+
+
+def generate_bodies(args: argparse.Namespace, folders: Sequence[Path]) -> None:
+    """After ``intermask generate``: the bodies of its sample folders when --body-model is given."""
+    if getattr(args, "body_model", None) is not None:
+        device = getattr(args, "device", None) or "cpu"
+        write_bodies(
+            folders,
+            body_model=args.body_model,
+            kind=args.body_model_type,
+            gender=args.body_gender,
+            device=device,
+            viewer=not getattr(args, "no_render", False),
+        )
 
 
 def add_body_parser(commands) -> None:

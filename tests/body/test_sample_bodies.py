@@ -115,3 +115,19 @@ def test_clear_errors_name_the_file(interhuman_sample, model_folder, tmp_path, c
     (interhuman_sample / "features.npy").unlink()
     assert main([str(interhuman_sample)]) == 2
     assert "features.npy: not found" in capsys.readouterr().err
+
+
+def test_generate_options_add_bodies_to_the_written_folders(interhuman_sample, model_folder):
+    """What ``intermask generate --body-model`` does after writing its sample folders."""
+    import argparse
+
+    from intermask.body.command import add_generate_body_options, generate_bodies
+
+    parser = argparse.ArgumentParser()
+    add_generate_body_options(parser)
+    args = parser.parse_args(["--body-model", str(model_folder), "--body-model-type", "smplx"])
+    generate_bodies(args, [interhuman_sample])
+    assert (interhuman_sample / "body_fit.json").is_file() and (
+        interhuman_sample / "bodies.glb"
+    ).is_file()
+    generate_bodies(parser.parse_args([]), [interhuman_sample])  # no --body-model: nothing to do
