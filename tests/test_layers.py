@@ -20,7 +20,7 @@ STAGES = [
     ["text"],
     ["vq"],
     ["interm"],
-    ["evaluator", "reaction", "render", "momask"],
+    ["evaluator", "reaction", "render", "momask", "body"],
     ["evaluation"],
     ["train", "generate", "convert", "convert_momask"],
     ["evaluate", "overfit", "overfit_momask", "bench"],
