@@ -17,6 +17,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from intermask.body.command import add_body_parser, add_generate_body_options
 from intermask.motion.kinds import DATASET_KINDS
 
 
@@ -167,7 +168,10 @@ def _generate(args: argparse.Namespace) -> int:
     options = vars(args)
     sampler = {name: options[name] for name in args.sampler_options if options[name] is not None}
     fields = {name: options[name] for name in gen.Request.__dataclass_fields__ if name in options}
-    gen.run(gen.Request(**fields, sampler=sampler))
+    folders = gen.run(gen.Request(**fields, sampler=sampler))
+    from intermask.body.command import generate_bodies
+
+    generate_bodies(args, folders)  # --body-model: bodies, .glb and meshes (docs/bodies.md)
     return 0
 
 
@@ -276,6 +280,7 @@ def _add_generate_parser(commands) -> None:
         "--out", type=_output_folder, help="output folder (default outputs/generate)"
     )
     parser.add_argument("--no-render", action="store_true", help="write arrays and JSON only")
+    add_generate_body_options(parser)
     parser.set_defaults(run=_generate, sampler_options=sampler_options)
 
 
@@ -417,6 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
     success.set_defaults(run=_data_success_stats)
 
     _add_generate_parser(commands)
+    add_body_parser(commands)
     _add_convert_parser(commands)
     return parser
 

@@ -6,9 +6,18 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from intermask.body.fit import FitSettings
-from intermask.body.model import DEFAULT_BETAS, GENDERS, NUM_MODEL_JOINTS, load_body_model
+if TYPE_CHECKING:
+    from intermask.body.fit import FitSettings
+
+# intermask.body.model's and FitSettings' values, restated so that the CLI parser imports no torch
+# (``intermask --help`` answers at once); tests/body/test_sample_bodies.py ties them
+KINDS = ("smplh", "smplx")
+GENDERS = ("neutral", "male", "female")
+DEFAULT_BETAS = 10
+DEFAULT_ITERATIONS = 60
+DEFAULT_THREADS = 1
 
 DESCRIPTION = (
     "Fits one SMPL-X or SMPL-H body per person to each sample folder's joints.npy (starting from "
@@ -28,7 +37,7 @@ def add_body_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         help="SMPL-X / SMPL-H file (SMPLX_NEUTRAL.npz, smplh/neutral/model.npz) or a folder of them",
     )
-    parser.add_argument("--model-type", choices=tuple(NUM_MODEL_JOINTS), help="default: the file's")
+    parser.add_argument("--model-type", choices=KINDS, help="default: the file's")
     parser.add_argument(
         "--gender", choices=GENDERS, help="default: the file's (neutral if it says none)"
     )
@@ -39,11 +48,11 @@ def add_body_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--iterations",
         type=int,
-        default=FitSettings.iterations,
+        default=DEFAULT_ITERATIONS,
         help="L-BFGS iterations of the fit",
     )
     parser.add_argument(
-        "--threads", type=int, default=FitSettings.threads, help="CPU threads while fitting"
+        "--threads", type=int, default=DEFAULT_THREADS, help="CPU threads while fitting"
     )
     parser.add_argument("--no-viewer", action="store_true", help="leave viewer.html as it is")
 
@@ -60,6 +69,7 @@ def write_bodies(
     viewer: bool = True,
 ) -> None:
     """Body files for each sample folder (intermask.body.sample.body_outputs), one line each."""
+    from intermask.body.model import load_body_model
     from intermask.body.sample import body_outputs
 
     model = None
@@ -80,6 +90,8 @@ def write_bodies(
 
 
 def run_body(args: argparse.Namespace) -> int:
+    from intermask.body.fit import FitSettings
+
     write_bodies(
         args.samples,
         body_model=args.body_model,
@@ -102,9 +114,7 @@ def add_generate_body_options(parser: argparse.ArgumentParser) -> None:
         help="SMPL-X / SMPL-H file or folder: also write body_person<k>.npz, bodies.glb, "
         "body_fit.json and a viewer with the meshes (docs/bodies.md)",
     )
-    parser.add_argument(
-        "--body-model-type", choices=tuple(NUM_MODEL_JOINTS), help="default: the file's"
-    )
+    parser.add_argument("--body-model-type", choices=KINDS, help="default: the file's")
     parser.add_argument("--body-gender", choices=GENDERS, help="default: the file's")
 
 

@@ -131,3 +131,59 @@ def test_generate_options_add_bodies_to_the_written_folders(interhuman_sample, m
         interhuman_sample / "bodies.glb"
     ).is_file()
     generate_bodies(parser.parse_args([]), [interhuman_sample])  # no --body-model: nothing to do
+
+
+def test_the_console_script_runs_body_and_generate_takes_a_body_model(
+    interhuman_sample, model_folder, capsys
+):
+    from intermask.cli import build_parser
+    from intermask.cli import main as cli_main
+
+    assert (
+        cli_main(
+            [
+                "body",
+                str(interhuman_sample),
+                "--body-model",
+                str(model_folder / "SMPLX_NEUTRAL.npz"),
+            ]
+        )
+        == 0
+    )
+    assert (interhuman_sample / "body_fit.json").is_file()
+    assert (
+        cli_main(["body", str(interhuman_sample), "--body-model", str(model_folder / "nope.npz")])
+        == 2
+    )
+    assert "intermask body: error: " in capsys.readouterr().err
+    args = build_parser().parse_args(
+        [
+            "generate",
+            "--checkpoint",
+            "run",
+            "--text",
+            "hi",
+            "--body-model",
+            "m",
+            "--body-gender",
+            "female",
+        ]
+    )
+    assert (
+        str(args.body_model) == "m"
+        and args.body_gender == "female"
+        and args.body_model_type is None
+    )
+
+
+def test_the_parsers_defaults_are_the_models():
+    from intermask.body import command
+    from intermask.body.fit import FitSettings
+    from intermask.body.model import DEFAULT_BETAS, GENDERS, NUM_MODEL_JOINTS
+
+    assert command.KINDS == tuple(sorted(NUM_MODEL_JOINTS)) and command.GENDERS == GENDERS
+    assert command.DEFAULT_BETAS == DEFAULT_BETAS
+    assert (command.DEFAULT_ITERATIONS, command.DEFAULT_THREADS) == (
+        FitSettings.iterations,
+        FitSettings.threads,
+    )
