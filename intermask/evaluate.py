@@ -7,6 +7,7 @@ print the table. ``make eval`` wraps it.
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from collections.abc import Iterator
@@ -223,15 +224,35 @@ def _arflow_rows(cfg: DictConfig, normalizer, device, checkpoints) -> list[Motio
 
 
 def measured(cfg: DictConfig, source: MotionSource, *, latency: bool = True) -> MotionSource:
-    """``source`` with the penetration (``cfg.penetration``) and latency columns."""
+    """``source`` with the penetration (``cfg.penetration``) and latency columns; with
+    ``penetration.body_model``, the mesh penetration columns too (docs/bodies.md)."""
     settings = cfg.penetration
+    penetration = cfg.mode in settings.modes
+    mesh = None
+    if penetration and settings.get("body_model"):
+        from intermask.body.penetration import MeshPenetration
+
+        mesh = MeshPenetration(
+            _body_model(str(settings.body_model), settings.get("body_gender")),
+            pitch=settings.pitch,
+            tolerance=settings.tolerance,
+        )
     return Measured(
         source,
-        penetration=cfg.mode in settings.modes,
+        penetration=penetration,
         latency=latency,
         pitch=settings.pitch,
         tolerance=settings.tolerance,
+        mesh=mesh,
     )
+
+
+@functools.cache
+def _body_model(path: str, gender: str | None):
+    """The configured body model, read once for every row (fitted on the CPU in float64)."""
+    from intermask.body.model import load_body_model
+
+    return load_body_model(path, gender=gender, dtype=torch.float64)
 
 
 def _check_config(cfg: DictConfig) -> str:

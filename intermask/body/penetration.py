@@ -62,11 +62,12 @@ class MeshPenetration:
         for start in range(0, joints.shape[0], self.fit_samples):
             rows = slice(start, start + self.fit_samples)
             count, persons = joints[rows].shape[:2]
-            padded = pad_with_last_frame(joints[rows], lengths[rows]).flatten(0, 1)
+            longest = int(lengths[rows].max())  # batches come padded to the protocol's length
+            padded = pad_with_last_frame(joints[rows, :, :longest], lengths[rows]).flatten(0, 1)
             motion = (
                 None
                 if features is None
-                else pad_with_last_frame(features[rows], lengths[rows]).flatten(0, 1)
+                else pad_with_last_frame(features[rows, :, :longest], lengths[rows]).flatten(0, 1)
             )
             with torch.enable_grad():
                 fit = fit_bodies(

@@ -6,7 +6,7 @@ two-person motion; :class:`Measured` adds penetration and latency to any of them
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 from einops import rearrange
@@ -23,6 +23,9 @@ from intermask.reaction.guidance import GUIDANCE_LABELS, Guidance
 from intermask.reaction.roles import actor_index
 from intermask.reaction.sampler import sample_reactions
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
+
+if TYPE_CHECKING:
+    from intermask.body.penetration import MeshPenetration
 
 
 def token_lengths(batch: Batch, frames: int) -> torch.Tensor:
@@ -208,7 +211,9 @@ class Measured(MotionSource):
     """A row plus its Intersection Volume (cm^3 per frame), Intersection Frequency (share of
     frames over ``tolerance`` cm^3) and, with ``latency``, the wall time of the row's call per
     sample (ms; batches of the protocol's eval batch size) over the evaluation pass (ARFlow
-    section 4.1; capsule proxy of :mod:`intermask.physics`).
+    section 4.1; capsule proxy of :mod:`intermask.physics`). With ``mesh`` (a body model is
+    configured) the same measures on fitted body meshes too (``mesh_iv_cm3``, ``mesh_if``) and
+    the fit's mean joint error (``mesh_fit_error_mm``; docs/bodies.md).
 
     Only the evaluation pass counts: measurement stops at ``extra_metrics`` (read after that
     pass) and restarts at ``reset`` (before the next), so MultiModality batches do not enter.
@@ -222,8 +227,10 @@ class Measured(MotionSource):
         latency: bool = True,
         pitch: float = DEFAULT_PITCH,
         tolerance: float = DEFAULT_TOLERANCE,
+        mesh: MeshPenetration | None = None,
     ) -> None:
         self.source, self.penetration, self.latency = source, penetration, latency
+        self.mesh = mesh if penetration else None
         self.volume = IntersectionVolume(pitch=pitch)
         self.frequency = IntersectionFrequency(pitch=pitch, tolerance=tolerance)
         self.name, self.generates = source.name, source.generates
@@ -235,6 +242,8 @@ class Measured(MotionSource):
         self._measuring = True
         self.volume.reset()
         self.frequency.reset()
+        if self.mesh is not None:
+            self.mesh.reset()
         self._seconds, self._samples = 0.0, 0
 
     def __call__(self, batch: Batch, seeds: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -259,6 +268,8 @@ class Measured(MotionSource):
         )[valid]
         self.volume.update(volumes=volume)  # computed once, counted by both metrics
         self.frequency.update(volumes=volume)
+        if self.mesh is not None:
+            self.mesh.update(joints, motion.float(), lengths)
 
     def extra_metrics(self) -> dict[str, float]:
         self._measuring = False
@@ -266,6 +277,8 @@ class Measured(MotionSource):
         if self.penetration and self.volume.frames > 0:
             values["iv_cm3"] = float(self.volume.compute())
             values["if"] = float(self.frequency.compute())
+            if self.mesh is not None:
+                values |= self.mesh.compute()
         if self.latency and self._samples:
             values["latency_ms"] = 1000.0 * self._seconds / self._samples
         return values

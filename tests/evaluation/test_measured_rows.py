@@ -93,3 +93,23 @@ def test_penetration_can_be_switched_off():
     row = Measured(source, penetration=False)
     row(None, torch.zeros(1))
     assert set(row.extra_metrics()) == {"latency_ms"}
+
+
+def test_a_body_model_adds_the_mesh_columns(tmp_path):
+    """With a body model (here the generated stand-in), the row also reports IV / IF on the
+    fitted meshes and the fit's error; two T-posed bodies 30 cm apart overlap in every frame."""
+    from intermask.body.model import load_body_model
+    from intermask.body.penetration import MeshPenetration
+    from intermask.body.standin import write_standin_model
+
+    model = load_body_model(write_standin_model(tmp_path, "smplx"), dtype=torch.float64)
+    motion = standing_pair(batch=2, frames=3, gap=0.3)
+    motion[..., 132:258] = torch.tensor([1.0, 0.0, 0.0, 1.0, 0.0, 0.0]).repeat(21)  # identity 6D
+    row = Measured(FixedPair(motion, torch.tensor([3, 2])), mesh=MeshPenetration(model, pitch=0.02))
+    row(None, torch.zeros(2))
+    values = row.extra_metrics()
+    assert values["mesh_if"] == 1.0 and values["mesh_iv_cm3"] > 100.0
+    assert values["mesh_fit_error_mm"] < 5.0 and values["if"] == 1.0
+    off = Measured(FixedPair(motion, torch.tensor([3, 2])), penetration=False, mesh=row.mesh)
+    off(None, torch.zeros(2))
+    assert set(off.extra_metrics()) == {"latency_ms"}  # no penetration: no mesh columns either
