@@ -192,3 +192,16 @@ def test_candidates_come_from_the_run_folder_first_then_as_recorded(tmp_path):
     assert lost.candidates("vq/last.ckpt") == [
         (Path.cwd() / "vq" / "last.ckpt", "relative to the working directory")
     ]
+
+
+def test_a_text_cache_not_written_yet_is_created_where_its_parent_is(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # a working directory without data/
+    project = tmp_path / "project"
+    (project / "data").mkdir(parents=True)
+    location = RunLocation(
+        tmp_path / "elsewhere" / "gen", cwd=project, recorded_folder=project / "o" / "gen"
+    )
+    text = {"_target_": "intermask.text.cache.TextFeatureCache", "cache_dir": "data/text_cache"}
+    assert location.relocated(text)["cache_dir"] == str(project / "data" / "text_cache")
+    lost = RunLocation(tmp_path / "elsewhere" / "gen", cwd=tmp_path / "gone", recorded_folder=None)
+    assert lost.relocated(text)["cache_dir"] is None  # nowhere to put it: in memory

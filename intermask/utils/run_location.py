@@ -106,8 +106,9 @@ class RunLocation:
     def relocated(self, node: Any) -> Any:
         """A checked run config section (a plain container) with its text towers' relative
         cache folders and weights files found from here (:meth:`candidates`). A cache folder
-        found nowhere becomes None (features computed in memory, logged); a weights file found
-        nowhere is left as recorded, for the encoder's own error."""
+        found nowhere is created where its parent folder exists, else it becomes None
+        (features computed in memory, logged); a weights file found nowhere is left as
+        recorded, for the encoder's own error."""
         if isinstance(node, list):
             return [self.relocated(value) for value in node]
         if not isinstance(node, dict):
@@ -123,9 +124,14 @@ class RunLocation:
         return node
 
     def _cache_dir(self, recorded: str) -> str | None:
-        existing = [p for p, _ in self.candidates(recorded) if p.is_dir()]
+        candidates = [p for p, _ in self.candidates(recorded)]
+        existing = [p for p in candidates if p.is_dir()]
         if existing:
             return str(existing[0])
+        # not written yet (a converted release's): where its parent folder exists, as before
+        creatable = [p for p in candidates if p.parent.is_dir()]
+        if creatable:
+            return str(creatable[0])
         log.info(
             "%s: the text cache folder %s (recorded by the run) is not found from here: text "
             "features are computed in memory",
