@@ -177,6 +177,10 @@ class EpochSampler(Sampler[tuple[int, int]]):
     global batch. A last, partial global batch is dropped with ``drop_last``; otherwise it is
     padded by repeating the order's first items (as ``DistributedSampler`` does; the metrics
     drop these duplicates by id) so that every rank runs the same number of steps.
+
+    ``skip``: the next pass starts that many items into this rank's order (then it is reset to
+    0); a resumed epoch continues where its checkpoint left it (``ResumableDataLoader``).
+    ``len()`` stays the whole pass's.
     """
 
     def __init__(
@@ -201,6 +205,7 @@ class EpochSampler(Sampler[tuple[int, int]]):
         self.epoch = epoch
         self.batch_size, self.rank, self.world_size = batch_size, rank, world_size
         self.drop_last = drop_last
+        self.skip = 0  # items of this rank's order the next pass leaves out (a resumed epoch)
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
@@ -236,5 +241,6 @@ class EpochSampler(Sampler[tuple[int, int]]):
         order = self._global_order()
         if self.world_size > 1:
             order = self._rank_order(order)
+        order, self.skip = order[self.skip :], 0  # the skip applies to one pass
         epoch = self.epoch
         return iter([(int(i), epoch) for i in order])

@@ -11,8 +11,9 @@ Lightning moves the epoch forward during training. ``eval_dataloader(epoch=k)`` 
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from lightning import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
@@ -24,8 +25,15 @@ from intermask.data.reader import ClipReader, Mode
 from intermask.data.readers import reader_class
 from intermask.data.statistics import compute_and_save_stats
 from intermask.motion.kinds import DatasetKind
+from intermask.utils.seeds import keyed_generator
 
 log = logging.getLogger(__name__)
+
+# The key of a loader's own generator, (seed, WORKER_SEED_KEY, epoch): torch draws every
+# iterator's worker base seed from the loader's generator, or from torch's global one when it has
+# none, which would shift the dropout draws of a resumed run that makes one iterator more or less
+# than the run it continues.
+WORKER_SEED_KEY = 1
 
 Split = Literal["train", "val", "test"]
 STAGE_SPLITS: dict[str, tuple[Split, ...]] = {
@@ -34,6 +42,57 @@ STAGE_SPLITS: dict[str, tuple[Split, ...]] = {
     "test": ("test",),
     "predict": ("test",),
 }
+
+
+class ResumableDataLoader(DataLoader):
+    """The training loader: a fit resumed from a checkpoint saved in the middle of an epoch (a
+    SIGTERM, Slurm's requeue signal) continues that epoch with the batch after the last one
+    trained, so it sees the batches of the run that was never stopped.
+
+    Lightning keeps ``state_dict()`` (the pass's epoch and the batches handed out so far) in every
+    checkpoint of a fit, and gives it back through ``load_state_dict`` when a fit resumes from it
+    (a loader with both methods is "stateful" to Lightning). The next pass of that epoch then
+    starts that many batches in (``EpochSampler.skip``: the skipped items are never read). A
+    checkpoint of an epoch's end resumes at the next epoch, from its start.
+
+    The sampler's order is drawn at the first batch of a pass, not when the iterator is made:
+    Lightning makes the first iterator before it sets the resumed epoch on the sampler, and with
+    worker processes the order would otherwise be drawn for the wrong epoch. Each pass draws its
+    workers' base seed from a generator keyed by (seed, epoch), never from torch's global one.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if not isinstance(self.sampler, EpochSampler) or self.batch_size is None:
+            raise TypeError("ResumableDataLoader needs an EpochSampler and a batch_size")
+        self.pass_epoch: int | None = None  # the epoch of the pass under way
+        self.batches_out = 0  # batches of that pass handed out (skipped ones included)
+        self._resume: tuple[int, int] | None = None
+
+    def state_dict(self) -> dict[str, int]:
+        epoch = self.sampler.epoch if self.pass_epoch is None else self.pass_epoch
+        return {"epoch": int(epoch), "batches": int(self.batches_out)}
+
+    def load_state_dict(self, state_dict: dict[str, int]) -> None:
+        self._resume = (int(state_dict["epoch"]), int(state_dict["batches"]))
+
+    def __iter__(self) -> Iterator[Any]:
+        return self._pass()
+
+    def _pass(self) -> Iterator[Any]:
+        sampler: EpochSampler = self.sampler
+        skip = 0
+        if self._resume is not None:
+            epoch, batches = self._resume
+            self._resume = None
+            if epoch == sampler.epoch:  # else the checkpoint ended its epoch: start the next
+                skip = batches
+        sampler.skip = skip * self.batch_size
+        self.pass_epoch, self.batches_out = sampler.epoch, skip
+        self.generator = keyed_generator(sampler.seed, WORKER_SEED_KEY, sampler.epoch)
+        for batch in super().__iter__():
+            self.batches_out += 1
+            yield batch
 
 
 class EpochDataModule(LightningDataModule):
@@ -80,6 +139,8 @@ class EpochDataModule(LightningDataModule):
         self.seed, self.eval_shuffle = seed, eval_shuffle
         self.normalizer = None
         self.datasets = {}
+        self._train_loader: ResumableDataLoader | None = None
+        self._train_position: dict[str, int] | None = None  # from a checkpoint, for the next one
 
     def load_normalizer(self) -> Normalizer | None:
         raise NotImplementedError
@@ -119,13 +180,16 @@ class EpochDataModule(LightningDataModule):
         drop_last: bool,
         epoch: int = 0,
         sharded: bool = True,
+        resumable: bool = False,
     ) -> DataLoader:
         """``sharded``: under a data-parallel trainer, each rank reads its block of every global
-        batch (``EpochSampler``); the trainer must not add its own distributed sampler."""
+        batch (``EpochSampler``); the trainer must not add its own distributed sampler.
+        ``resumable``: a :class:`ResumableDataLoader` (the training loader)."""
         if split not in self.datasets:
             self.setup({"train": "fit", "val": "validate", "test": "test"}[split])
         dataset = self.datasets[split]
         rank, world = self._processes() if sharded else (0, 1)
+        loader = ResumableDataLoader if resumable else DataLoader
         sampler = EpochSampler(
             len(dataset),
             shuffle=shuffle,
@@ -136,7 +200,7 @@ class EpochDataModule(LightningDataModule):
             world_size=world,
             drop_last=drop_last,
         )
-        return DataLoader(
+        return loader(
             dataset,
             batch_size=batch_size,
             sampler=sampler,
@@ -144,12 +208,42 @@ class EpochDataModule(LightningDataModule):
             pin_memory=self.pin_memory,
             persistent_workers=self.persistent_workers,
             drop_last=drop_last,
+            generator=keyed_generator(self.seed, WORKER_SEED_KEY, epoch),
         )
 
     def train_dataloader(self) -> DataLoader:
-        return self._loader(
-            "train", batch_size=self.batch_size, shuffle=True, drop_last=self.drop_last
+        loader = self._loader(
+            "train",
+            batch_size=self.batch_size,
+            shuffle=True,
+            drop_last=self.drop_last,
+            resumable=True,
         )
+        if self._train_position is not None:
+            loader.load_state_dict(self._train_position)
+            self._train_position = None
+        self._train_loader = loader
+        return loader
+
+    # The training loader's position travels in the datamodule's entry of every checkpoint, which
+    # Lightning restores before it makes the loader. Lightning would also restore the loader's own
+    # state (it is stateful), but only when the loader is made after the loops are restored; the
+    # learning-rate schedules ask for the number of steps (estimated_stepping_batches), which
+    # makes the loader earlier, so that path never runs.
+
+    def state_dict(self) -> dict[str, Any]:
+        if self._train_loader is None:
+            return {}
+        return {"train_loader": self._train_loader.state_dict()}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        position = state_dict.get("train_loader")
+        if position is None:
+            return
+        if self._train_loader is not None:
+            self._train_loader.load_state_dict(position)
+        else:
+            self._train_position = dict(position)
 
     def val_dataloader(self) -> DataLoader:
         return self._loader(
