@@ -13,6 +13,7 @@ import hydra
 import lightning as L
 import torch
 from hydra.utils import instantiate
+from lightning.fabric.plugins.environments import SLURMEnvironment
 from omegaconf import DictConfig, open_dict
 
 from intermask.config_files import config_dir
@@ -162,6 +163,18 @@ def log_effective_batch(cfg: DictConfig, trainer: L.Trainer) -> int:
     return effective
 
 
+def trainer_plugins() -> list[Any]:
+    """The Trainer's plugins: checkpoints written atomically (a kill mid-write never leaves a broken
+    last.ckpt) and, in a task started by srun, Lightning's Slurm environment (ranks, world size
+    and main address from Slurm) without its auto-requeue: Lightning saves and requeues from inside
+    the signal handler, wherever the step is; ``callbacks.preemption.RequeueOnSignal`` does it at
+    the end of the batch (docs/cluster.md)."""
+    plugins: list[Any] = [AtomicCheckpointIO()]
+    if SLURMEnvironment.detect():
+        plugins.append(SLURMEnvironment(auto_requeue=False))
+    return plugins
+
+
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit the configured model on the configured data; returns the final callback metrics."""
     L.seed_everything(cfg.seed, workers=True)
@@ -193,7 +206,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
         cfg.trainer,
         callbacks=instantiate_all(cfg.get("callbacks")),
         logger=instantiate_all(cfg.get("logger")) or False,
-        plugins=[AtomicCheckpointIO()],  # a kill mid-write never leaves a broken last.ckpt
+        plugins=trainer_plugins(),
     )
     log_effective_batch(cfg, trainer)
     # weights_only=True explicitly: torch.load then ignores TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD, and

@@ -1,5 +1,5 @@
 """The cluster path without a cluster: a 2-job sweep through submitit's local executor, and the
-SLURM launcher config's sbatch parameters."""
+Slurm launcher config's sbatch parameters. tests/slurm/ submits the same jobs to a real Slurm."""
 
 from __future__ import annotations
 
@@ -156,7 +156,9 @@ def test_a_preempted_job_is_requeued_and_resumes_its_checkpoint(
     assert (run / "preempted").is_file()  # the signal was sent ...
     logs = "".join(p.read_text() for p in (sweep / ".submitit").rglob("*_log.*"))
     assert "Caught signal SIGUSR2" in logs and "Requeued job" in logs  # ... submitit requeued
+    # the run saved last.ckpt at the end of the signalled batch, then handed over to submitit
+    assert "SIGUSR2: step 5 (epoch 1) saved to" in logs and "handing over" in logs
     train_log = (run / "train.log").read_text()
     assert "already holds" in train_log and "resuming from it" in train_log
     checkpoint = torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)
-    assert checkpoint["global_step"] == 6  # epoch 0 kept, epoch 1 redone and finished
+    assert checkpoint["global_step"] == 6  # resumed at step 5, the last batch of epoch 1 run
