@@ -523,7 +523,7 @@ def test_periodic_protocol_clock_and_count_continue_after_a_resume(tmp_path, mon
     assert resumed.hours() == pytest.approx(0.5 + 900.0 / 3600)  # 15 more minutes
 
 
-@pytest.mark.slow  # fits two bodies to every evaluated interaction: about a minute here
+@pytest.mark.slow  # fits two bodies to every evaluated interaction: 5 min on 2 loaded cores
 def test_reaction_table_has_mesh_penetration_beside_the_capsules(
     synthetic_interhuman_root, runs, tmp_path
 ):
