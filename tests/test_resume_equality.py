@@ -55,6 +55,9 @@ def _config(job: str, root: Path, vq_ckpt: Path | None, out: Path, *, kill=False
     else:
         cfg = _gen_config(root, vq_ckpt, out)
     with open_dict(cfg):
+        # fp32 on every CPU: `auto` picks bf16-mixed where the CPU has native bf16, and what is
+        # proven here is the arithmetic of the uninterrupted run repeated (docs/cluster.md)
+        cfg.trainer.precision = "32-true"
         if job == "gen":
             # one text cache for the three runs, as a resumed run shares its data folder's: a
             # caption's features are computed once, in whichever batch first holds it (batched
