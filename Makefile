@@ -22,7 +22,7 @@ SEED ?= 0
 ARGS ?=
 DATA_DIR ?= data
 
-.PHONY: help install test test-slow test-gpu test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo demo-momask overfit overfit-momask bench tb clean checkpoints parity-env parity
+.PHONY: help install test test-slow test-gpu test-slurm test-all lint format data data-check data-stats train-vq train-evaluator train-gen train-arflow eval demo demo-momask overfit overfit-momask bench tb clean checkpoints parity-env parity
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-14s %s\n", $$1, $$2}'
@@ -39,7 +39,7 @@ $(STAMP): pyproject.toml uv.lock
 	@uv_cmd=$$(command -v uv || echo "python3 -m uv"); $$uv_cmd sync --frozen --compile-bytecode
 	@touch $@
 
-test: install ## fast test suite (no `slow`, no `gpu`)
+test: install ## fast test suite (no `slow`, no `gpu`, no `slurm`)
 	$(VENV)/bin/pytest $(ARGS)
 
 test-slow: install ## only the slow tests (training runs, 1000-clip synthesis)
@@ -47,6 +47,9 @@ test-slow: install ## only the slow tests (training runs, 1000-clip synthesis)
 
 test-gpu: install ## GPU tests (skip without CUDA)
 	$(VENV)/bin/pytest -m gpu $(ARGS)
+
+test-slurm: install ## real Slurm jobs on a one-node cluster the tests start (root; installs Debian's Slurm; skip otherwise)
+	$(VENV)/bin/pytest -m slurm $(ARGS)
 
 test-all: install ## every test
 	$(VENV)/bin/pytest -m "" $(ARGS)

@@ -162,3 +162,10 @@ def test_a_preempted_job_is_requeued_and_resumes_its_checkpoint(
     assert "already holds" in train_log and "resuming from it" in train_log
     checkpoint = torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)
     assert checkpoint["global_step"] == 6  # resumed at step 5, the last batch of epoch 1 run
+
+
+def test_the_docs_show_the_sbatch_script_as_it_is():
+    script = (ROOT / "tools" / "slurm" / "train.sbatch").read_text()
+    assert f"```bash\n{script}```" in (ROOT / "docs" / "cluster.md").read_text()
+    # tests/slurm submits it as it is; it must stay runnable
+    assert (ROOT / "tools" / "slurm" / "train.sbatch").stat().st_mode & 0o111
