@@ -6,6 +6,7 @@ Thin by design: compose, instantiate, record, fit. Everything else lives in the 
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 from typing import Any
 
@@ -172,6 +173,12 @@ def trainer_plugins() -> list[Any]:
     plugins: list[Any] = [AtomicCheckpointIO()]
     if SLURMEnvironment.detect():
         plugins.append(SLURMEnvironment(auto_requeue=False))
+        log.info(
+            "Slurm job %s, task %s of %s: rank and world size from Lightning's SLURMEnvironment",
+            os.environ.get("SLURM_JOB_ID"),
+            os.environ.get("SLURM_PROCID"),
+            os.environ.get("SLURM_NTASKS"),
+        )
     return plugins
 
 

@@ -119,7 +119,6 @@ def test_outside_slurm_and_without_a_handler_no_signal_handler_is_touched(
 ):
     monkeypatch.delenv("SLURM_JOB_ID", raising=False)
     before = {s: signal.getsignal(s) for s in (signal.SIGUSR1, signal.SIGUSR2)}
-    assert set(before.values()) == {signal.SIG_DFL}
     look = ["+callbacks.look._target_=test_preemption.LookAtHandlers"]
     train(_config(synthetic_interhuman_root, tmp_path, ["callbacks.sample_animations=null", *look]))
     assert LookAtHandlers.seen == before

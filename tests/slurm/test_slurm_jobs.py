@@ -144,6 +144,8 @@ def test_two_tasks_through_srun_equal_one_process(slurm, synthetic_interhuman_ro
     for stage in ("vq", "gen"):
         log = Path(f"{tmp_path / stage}2.out").read_text()
         # Lightning took each task's rank from Slurm; the batch is global
+        for task in (0, 1):
+            assert f"task {task} of 2: rank and world size from Lightning's SLURMEnvironment" in log
         assert "GLOBAL_RANK: 0, MEMBER: 1/2" in log and "GLOBAL_RANK: 1, MEMBER: 2/2" in log
         assert "effective batch 8 = 4 per process x 2 process(es) x 1 accumulated" in log
         _assert_same_weights(_last(tmp_path / f"{stage}1"), _last(tmp_path / f"{stage}2"))
