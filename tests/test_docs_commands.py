@@ -24,6 +24,7 @@ is the command's shape, not the user's files.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import shlex
 import subprocess
@@ -163,8 +164,12 @@ def _check_make(words: list[str], where: str) -> None:
         assert f"$({name})" in makefile or f"{name} ?=" in makefile, (
             f"{where}: the Makefile does not read {name}"
         )
+    # as a user types it: under `make test ARGS=...` (.ci/run) make exports the suite's ARGS (and
+    # MAKEFLAGS) to this process, and every job line would end with pytest's options
+    own = set(re.findall(r"^([A-Z_]+) \?=", makefile, re.M)) | {"MAKEFLAGS", "MFLAGS", "MAKELEVEL"}
+    clean = {k: v for k, v in os.environ.items() if k not in own}
     done = subprocess.run(
-        ["make", "-n", *words[1:]], cwd=REPO, capture_output=True, text=True, timeout=60
+        ["make", "-n", *words[1:]], cwd=REPO, env=clean, capture_output=True, text=True, timeout=60
     )
     assert done.returncode == 0, f"{where}: make -n failed: {done.stderr}"
     for job in _job_lines(done.stdout):
