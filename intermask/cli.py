@@ -464,13 +464,30 @@ def _add_convert_parser(commands) -> None:
     convert.set_defaults(run=_convert_reference)
 
 
+def _user_error(error: Exception, args: argparse.Namespace) -> str | None:
+    """The one line a user error gets (None: a bug, whose traceback is wanted). A place that
+    cannot be written (full, read-only, no permission, a file in the way) is said with what to
+    do (:mod:`intermask.utils.write_errors`); data and checkpoint problems name the file."""
+    from intermask.utils.write_errors import describe
+
+    out = getattr(args, "out", None)
+    message = describe(error, fallback=out, elsewhere="choose another --out" if out else "")
+    if message is not None:
+        return message
+    if isinstance(error, (FileNotFoundError, FileExistsError, ValueError, pickle.UnpicklingError)):
+        return str(error)
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)
-    except (FileNotFoundError, FileExistsError, ValueError, pickle.UnpicklingError) as error:
-        # Data and checkpoint problems are user errors: one clear line naming the file.
-        print(f"intermask {args.command}: error: {error}", file=sys.stderr)
+    except Exception as error:
+        message = _user_error(error, args)
+        if message is None:
+            raise
+        print(f"intermask {args.command}: error: {message}", file=sys.stderr)
         return 2
 
 

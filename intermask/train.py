@@ -22,6 +22,7 @@ from intermask.utils.checkpoint_io import AtomicCheckpointIO
 from intermask.utils.lightning import NON_FINITE_POLICIES
 from intermask.utils.precision import PrecisionChoice, resolve_precision
 from intermask.utils.run_record import write_run_record
+from intermask.utils.write_errors import reported_write_errors
 
 log = logging.getLogger(__name__)
 CONFIG_DIR = str(config_dir())
@@ -226,7 +227,16 @@ def train(cfg: DictConfig) -> dict[str, float]:
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="train_vq")
 def main(cfg: DictConfig) -> None:
-    train(cfg)
+    # a full or unwritable run folder: one line and exit 2 (intermask.utils.write_errors); the
+    # checkpoints written before stay whole (AtomicCheckpointIO), the run folder resumes from them
+    with reported_write_errors(
+        "python -m intermask.train",
+        fallback=cfg.paths.output_dir,
+        elsewhere="choose another hydra.run.dir",
+        then=f"run the command again (hydra.run.dir={cfg.paths.output_dir} continues from its "
+        "last checkpoint, if any)",
+    ):
+        train(cfg)
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ from intermask.interm.sampler import InteractionSampler
 from intermask.utils.files import file_hash
 from intermask.utils.precision import OPTIONS as PRECISION_OPTIONS
 from intermask.utils.precision import resolve_precision
+from intermask.utils.staging import staged_outputs
 from intermask.vq.model import FRAMES_PER_STEP
 
 # the options of intermask.generate.common.FAMILY_OPTIONS that an Inter-M run takes
@@ -325,12 +326,17 @@ def run(request: Request, defaults: dict[str, Any], target: str) -> list[Path]:
         progress=True,
     )
     renders = [] if request.no_render else list(defaults["renders"])
-    for sample, directory in zip(samples, folders, strict=True):
-        paths = write_sample(sample, directory, generator=generator, settings=job, renders=renders)
-        frames_out = sample.features.shape[1]
-        print(
-            f"{directory}: {sample.mode}, {frames_out} frames ({frames_out / job.fps:.1f} s), "
-            f"seed {sample.seed}, {sample.caption or '(no text)'!r} -> {', '.join(sorted(paths))}"
-        )
+    # the sample folders appear together when all are written, or none does (a full disk)
+    with staged_outputs(out, [folder.name for folder in folders]) as staged:
+        for sample, directory in zip(samples, folders, strict=True):
+            paths = write_sample(
+                sample, staged / directory.name, generator=generator, settings=job, renders=renders
+            )
+            frames_out = sample.features.shape[1]
+            print(
+                f"{directory}: {sample.mode}, {frames_out} frames ({frames_out / job.fps:.1f} s), "
+                f"seed {sample.seed}, {sample.caption or '(no text)'!r} -> "
+                f"{', '.join(sorted(paths))}"
+            )
     print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
     return folders

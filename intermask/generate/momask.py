@@ -31,6 +31,7 @@ from intermask.momask.load import load_momask_sampler
 from intermask.momask.sampler import MoMaskDecoding, MoMaskSampler
 from intermask.motion import humanml3d as hml
 from intermask.utils.files import file_hash
+from intermask.utils.staging import staged_outputs
 
 # model._target_ of a MoMask train_gen run -> its role
 MASK_MODULE = "intermask.momask.module.MaskTransformerModule"
@@ -194,18 +195,20 @@ def run(request: Request, defaults: dict[str, Any], target: str) -> list[Path]:
     renders = [] if request.no_render else list(defaults["renders"])
     text_encoder = sampler.text.encoder.extra_repr()
     layers = "base + residual layers" if sampler.residual_net is not None else "base layer"
-    for sample, directory in zip(samples, folders, strict=True):
-        paths = write_momask_sample(
-            sample,
-            directory,
-            checkpoints=checkpoints,
-            text_encoder=text_encoder,
-            settings=job,
-            renders=renders,
-        )
-        print(
-            f"{directory}: MoMask ({layers}), {frames} frames ({frames / job.fps:.1f} s), "
-            f"seed {sample.seed}, {sample.caption!r} -> {', '.join(sorted(paths))}"
-        )
+    # the sample folders appear together when all are written, or none does (a full disk)
+    with staged_outputs(out, [folder.name for folder in folders]) as staged:
+        for sample, directory in zip(samples, folders, strict=True):
+            paths = write_momask_sample(
+                sample,
+                staged / directory.name,
+                checkpoints=checkpoints,
+                text_encoder=text_encoder,
+                settings=job,
+                renders=renders,
+            )
+            print(
+                f"{directory}: MoMask ({layers}), {frames} frames ({frames / job.fps:.1f} s), "
+                f"seed {sample.seed}, {sample.caption!r} -> {', '.join(sorted(paths))}"
+            )
     print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
     return folders

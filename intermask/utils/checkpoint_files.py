@@ -18,6 +18,8 @@ from typing import Any
 
 import torch
 
+from intermask.utils.write_errors import write_error_in
+
 TEMPORARY_SUFFIX = ".partial"  # "<name>.<pid>.partial" beside the destination while writing
 
 
@@ -57,8 +59,12 @@ def atomic_torch_save(payload: Any, path: str | Path) -> None:
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(temporary, path)
-    except BaseException:
+    except BaseException as error:
         temporary.unlink(missing_ok=True)
+        # a full disk surfaces as torch's RuntimeError over the OSError: name the checkpoint
+        found = write_error_in(error)
+        if found is not None and found.filename in (None, str(temporary)):
+            found.filename = str(path)
         raise
     _fsync_folder(path.parent)
     # what writers killed mid-write left behind (a SIGKILL runs no cleanup); a file of a
