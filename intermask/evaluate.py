@@ -350,8 +350,9 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     result = runner.run(header)
     # CPU seconds of the protocol itself (models and data already loaded; all threads)
     result.header["protocol_cpu_s"] = round(time.process_time() - start, 3)
-    json_path, markdown_path = write_results(result, output_dir)
-    _log_tensorboard(result, output_dir / "tensorboard")
+    json_path, markdown_path = write_results(  # together or not at all
+        result, output_dir, beside={"tensorboard": lambda path: _log_tensorboard(result, path)}
+    )
     print(markdown_path.read_text())
     print(f"results: {json_path} and {markdown_path}")
     return result.to_dict()
@@ -411,7 +412,15 @@ def _log_tensorboard(result, directory: Path) -> None:
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="eval")
 def main(cfg: DictConfig) -> None:
-    evaluate(cfg)
+    from intermask.utils.write_errors import reported_write_errors
+
+    # a full or unwritable run folder: one line and exit 2; an earlier table there is kept
+    with reported_write_errors(
+        "python -m intermask.evaluate",
+        fallback=cfg.paths.output_dir,
+        elsewhere="choose another hydra.run.dir",
+    ):
+        evaluate(cfg)
 
 
 if __name__ == "__main__":

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from intermask.evaluation.protocol import ProtocolResult, Summary
+from intermask.utils.staging import staged_outputs
+
+RESULT_FILES = ("results.json", "results.md")
 
 # (key, heading, direction): the paper's columns in its order, then the extra ones we report
 COLUMNS: tuple[tuple[str, str, str], ...] = (
@@ -127,12 +131,24 @@ def _title(result: ProtocolResult) -> str:
     )
 
 
-def write_results(result: ProtocolResult, directory: str | Path) -> tuple[Path, Path]:
-    """-> (results.json, results.md) written into ``directory``."""
+def write_results(
+    result: ProtocolResult,
+    directory: str | Path,
+    *,
+    beside: Mapping[str, Callable[[Path], object]] | None = None,
+) -> tuple[Path, Path]:
+    """-> (results.json, results.md) written into ``directory``, with the outputs of ``beside``
+    (name -> a writer of ``<folder>/<name>``, e.g. the TensorBoard scalars). They are written
+    into a staging folder and appear together, replacing an earlier table, or not at all: a full
+    disk leaves the folder as it was (:func:`~intermask.utils.staging.staged_outputs`)."""
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    json_path, markdown_path = directory / "results.json", directory / "results.md"
-    json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    beside = dict(beside or {})
     actions = action_table(result)
-    markdown_path.write_text(markdown_table(result) + (f"\n{actions}" if actions else ""))
-    return json_path, markdown_path
+    with staged_outputs(directory, [*RESULT_FILES, *beside], replace=True) as staged:
+        (staged / "results.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+        (staged / "results.md").write_text(
+            markdown_table(result) + (f"\n{actions}" if actions else "")
+        )
+        for name, write in beside.items():
+            write(staged / name)
+    return directory / "results.json", directory / "results.md"
