@@ -3,7 +3,10 @@
 
 Animations are logged as GIF image summaries, which TensorBoard's image tab plays; the decoded
 joint statistics go next to them as scalars. Rank zero only; the metrics of the modules are not
-touched.
+touched. Every GIF is a glance, not a record: at most ``max_frames`` frames drawn at ``gif_fps``
+(every k-th frame of the data, k = round(fps / gif_fps)) and ``size`` pixels, so that the images
+do not swamp a run's event file (``animation_joints``; the defaults are in
+``configs/callbacks/sample_animations.yaml``).
 """
 
 from __future__ import annotations
@@ -36,6 +39,15 @@ def gif_summary(tag: str, images: Sequence[Image.Image], *, fps: float):
     return Summary(value=[Summary.Value(tag=tag, image=image)])
 
 
+def animation_joints(
+    joints: torch.Tensor, *, fps: float, gif_fps: float, max_frames: int
+) -> tuple[torch.Tensor, float]:
+    """(T, ...) joints at ``fps`` -> (every k-th frame, at most ``max_frames`` of them; the rate
+    they play at, fps / k), k = max(1, round(fps / gif_fps))."""
+    stride = max(1, round(fps / gif_fps))
+    return joints[::stride][:max_frames], fps / stride
+
+
 def _experiment_writers(trainer: L.Trainer) -> list[Any]:
     """The SummaryWriters of the trainer's TensorBoard loggers."""
     writers = []
@@ -54,7 +66,9 @@ class SampleAnimations(Callback):
         seconds: length of the generated samples.
         clips: validation clips the VQ-VAE reconstructs (ground truth drawn grey beside it).
         every_n_epochs: log after every n-th validation (sanity checks never log).
-        fps: frame rate of the data; size: (width, height) of a frame in pixels.
+        fps: frame rate of the data; gif_fps: frames per second drawn (every k-th frame of
+            the data, k = round(fps / gif_fps)); max_frames: at most this many frames per GIF
+            (the rest of the motion is left out); size: (width, height) of a frame in pixels.
         iterations: decoding iterations for the generated samples.
     """
 
@@ -66,13 +80,20 @@ class SampleAnimations(Callback):
         clips: int = 2,
         every_n_epochs: int = 1,
         fps: float = 30.0,
-        size: tuple[int, int] = (320, 240),
+        gif_fps: float = 10.0,
+        max_frames: int = 30,
+        size: tuple[int, int] = (160, 120),
         iterations: int = 10,
     ) -> None:
         if every_n_epochs < 1:
             raise ValueError(f"every_n_epochs must be >= 1, got {every_n_epochs}")
+        if fps <= 0 or gif_fps <= 0 or max_frames < 1:
+            raise ValueError(
+                f"need fps > 0, gif_fps > 0 and max_frames >= 1, got {fps}, {gif_fps}, {max_frames}"
+            )
         self.prompts, self.seconds, self.clips = list(prompts), seconds, clips
         self.every_n_epochs, self.fps, self.size = every_n_epochs, fps, tuple(size)
+        self.gif_fps, self.max_frames = gif_fps, max_frames
         self.iterations = iterations
 
     def on_validation_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
@@ -89,10 +110,13 @@ class SampleAnimations(Callback):
         from intermask.render import render_frames
 
         for tag, joints, reference in animations:
-            images = render_frames(
-                joints, caption=tag, size=self.size, reference_person=reference, fps=self.fps
+            joints, rate = animation_joints(
+                joints, fps=self.fps, gif_fps=self.gif_fps, max_frames=self.max_frames
             )
-            summary = gif_summary(f"samples/{tag}", images, fps=self.fps)
+            images = render_frames(
+                joints, caption=tag, size=self.size, reference_person=reference, fps=rate
+            )
+            summary = gif_summary(f"samples/{tag}", images, fps=rate)
             for writer in writers:
                 writer._get_file_writer().add_summary(summary, step)
 
