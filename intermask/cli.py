@@ -58,10 +58,11 @@ def _data_synth(args: argparse.Namespace) -> int:
 
 
 def _data_check(args: argparse.Namespace) -> int:
+    from intermask.data.layout import detect_layout
     from intermask.data.validation import check_dataset
 
     root = Path(args.root)
-    dataset_format = _resolve_format(root, args.format)
+    dataset_format = args.format or detect_layout(root)  # HumanML3D folders too
     problems = check_dataset(root, dataset_format)
     for problem in problems:
         print(problem)
@@ -375,7 +376,11 @@ def build_parser() -> argparse.ArgumentParser:
         "check", help="validate every file of a dataset and report all problems at once"
     )
     check.add_argument("root", type=Path)
-    _add_format_option(check)
+    check.add_argument(
+        "--format",
+        choices=(*DATASET_KINDS, "humanml3d"),
+        help="dataset layout (default: detected from the folder)",
+    )
     check.set_defaults(run=_data_check)
 
     stats = data.add_parser(

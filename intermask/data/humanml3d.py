@@ -110,25 +110,30 @@ def _parse_tag(text: str, path: Path, number: int) -> float:
     return value
 
 
+def parse_tagged_caption(line: str, path: Path, number: int) -> TaggedCaption:
+    """One ``caption#word/POS ...#start#end`` line (``number`` counts from 1); DataError naming the
+    file and the line when malformed."""
+    parts = line.split("#")
+    if len(parts) != 4 or not parts[0].strip():
+        raise DataError(
+            f"{path}: line {number}: expected 'caption#word/POS ...#start#end' (4 fields), "
+            f"got {len(parts)} fields in {line!r}"
+        )
+    tokens = tuple(parts[1].split())
+    bad = [t for t in tokens if not t.rpartition("/")[0] or not t.rpartition("/")[2]]
+    if not tokens or bad:
+        raise DataError(f"{path}: line {number}: expected tokens 'word/POS ...', got {parts[1]!r}")
+    start, end = (_parse_tag(p.strip(), path, number) for p in parts[2:4])
+    return TaggedCaption(parts[0].strip(), tokens, start, end)
+
+
 def read_tagged_captions(path: Path) -> list[TaggedCaption]:
-    """Parse ``caption#word/POS ...#start#end`` lines; DataError (file and line) when malformed."""
-    captions = []
-    for number, line in enumerate(read_caption_lines(path), start=1):
-        parts = line.split("#")
-        if len(parts) != 4 or not parts[0].strip():
-            raise DataError(
-                f"{path}: line {number}: expected 'caption#word/POS ...#start#end' (4 fields), "
-                f"got {len(parts)} fields in {line!r}"
-            )
-        tokens = tuple(parts[1].split())
-        bad = [t for t in tokens if not t.rpartition("/")[0] or not t.rpartition("/")[2]]
-        if not tokens or bad:
-            raise DataError(
-                f"{path}: line {number}: expected tokens 'word/POS ...', got {parts[1]!r}"
-            )
-        start, end = (_parse_tag(p.strip(), path, number) for p in parts[2:4])
-        captions.append(TaggedCaption(parts[0].strip(), tokens, start, end))
-    return captions
+    """Parse ``caption#word/POS ...#start#end`` lines; DataError (file and line) at the first
+    malformed one (``intermask data check`` lists every one)."""
+    return [
+        parse_tagged_caption(line, path, number)
+        for number, line in enumerate(read_caption_lines(path), start=1)
+    ]
 
 
 def subclip_tag(rank: int) -> str:

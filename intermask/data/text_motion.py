@@ -4,7 +4,8 @@ Two kinds of batch, as in MoMask: ``mode="window"`` gives the tokenizer's fixed 
 (:class:`~intermask.data.humanml3d.HumanML3DWindows`), ``mode="item"`` the text-motion items
 of the transformers and the evaluation (:class:`~intermask.data.humanml3d.HumanML3DDataset`).
 Statistics are the release's own ``Mean.npy`` / ``Std.npy`` (the reference z-scores with them);
-loaders, seeding and data-parallel sharding are :class:`EpochDataModule`'s.
+loaders, seeding and data-parallel sharding are :class:`EpochDataModule`'s. A folder that fails to
+load is reported whole: the DataError lists every problem of ``intermask data check``'s checker.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from intermask.data.datamodule import EpochDataModule, Split
 from intermask.data.errors import DataError
 from intermask.data.humanml3d import HumanML3DDataset, HumanML3DLayout, HumanML3DWindows
 from intermask.data.normalization import Normalizer
+from intermask.data.validation import all_problems_error
 from intermask.motion.humanml3d import FEATURE_DIM
 
 log = logging.getLogger(__name__)
@@ -98,6 +100,14 @@ class TextMotionDataModule(EpochDataModule):
                 self.synthetic_seed,
             )
             generate_humanml3d(self.root, clips=self.synthetic_clips, seed=self.synthetic_seed)
+
+    def setup(self, stage: str | None = None) -> None:
+        """As :meth:`EpochDataModule.setup`; a dataset that fails to load raises one DataError
+        listing every problem ``intermask data check`` finds, not only the first."""
+        try:
+            super().setup(stage)
+        except DataError as first:
+            raise all_problems_error(self.root, "humanml3d", first) from first
 
     def load_normalizer(self) -> Normalizer:
         layout = HumanML3DLayout(self.root)

@@ -2,7 +2,9 @@
 
 The dataset constructors stop at the first problem; ``check_dataset`` keeps going and lists all of
 them, each naming the file and what is wrong. Clips that the readers skip on purpose (too short,
-ignore list) are not problems; ``check_dataset_report`` lists them separately.
+ignore list) are not problems; ``check_dataset_report`` lists them separately. The same checks
+cover the two-person layouts (InterHuman, Inter-X) and HumanML3D; when a HumanML3D dataset fails
+to load, its DataModule reports every problem the checker finds (:func:`all_problems_error`).
 """
 
 from __future__ import annotations
@@ -12,12 +14,21 @@ from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
+import numpy as np
+
+from intermask.data import humanml3d as hml
 from intermask.data import interhuman as ih
 from intermask.data import interx as ix
-from intermask.data.common import read_id_list, read_interaction_meta
+from intermask.data.common import (
+    read_caption_lines,
+    read_id_list,
+    read_interaction_meta,
+    read_npy,
+)
 from intermask.data.errors import DataError, DataProblem, SkippedClip
-from intermask.data.layout import detect_format
-from intermask.motion.kinds import DatasetKind, check_dataset_kind
+from intermask.data.layout import LAYOUT_KINDS, LayoutKind, detect_layout
+from intermask.data.normalization import Normalizer
+from intermask.motion.humanml3d import FEATURE_DIM as HML_FEATURE_DIM
 
 SPLITS = ("train", "val", "test")
 
@@ -35,12 +46,15 @@ class CheckReport:
         return not self.problems
 
 
-def check_dataset(root: str | Path, format: DatasetKind | None = None) -> list[DataProblem]:
+def check_dataset(root: str | Path, format: LayoutKind | None = None) -> list[DataProblem]:
     """Every problem found under ``root`` (empty list: the readers will load all splits)."""
     return check_dataset_report(root, format).problems
 
 
-def check_dataset_report(root: str | Path, format: DatasetKind | None = None) -> CheckReport:
+def check_dataset_report(root: str | Path, format: LayoutKind | None = None) -> CheckReport:
+    """``format``: "interhuman", "interx" or "humanml3d"; None = detected from the folder."""
+    if format is not None and format not in LAYOUT_KINDS:
+        raise ValueError(f"format must be one of {LAYOUT_KINDS}, got {format!r}")
     root = Path(root)
     report = CheckReport()
     if not root.is_dir():
@@ -48,15 +62,31 @@ def check_dataset_report(root: str | Path, format: DatasetKind | None = None) ->
         return report
     if format is None:
         try:
-            format = detect_format(root)
+            format = detect_layout(root)
         except FileNotFoundError as err:
             report.problems.append(DataProblem(root, str(err)))
             return report
-    if check_dataset_kind(format, name="format") == "interhuman":
-        _check_interhuman(root, report)
-    else:
-        _check_interx(root, report)
+    checks = {"interhuman": _check_interhuman, "interx": _check_interx}
+    checks.get(format, _check_humanml3d)(root, report)
     return report
+
+
+def all_problems_error(root: str | Path, format: LayoutKind, first: DataError) -> DataError:
+    """The error a dataset that failed to load with ``first`` raises: ``first`` itself when it is
+    the only problem the checker finds, else one DataError listing ``first`` and every other
+    problem, one per line (what ``intermask data check`` prints)."""
+    try:
+        problems = [str(p) for p in check_dataset(root, format)]
+    except Exception:  # noqa: BLE001 - the checker must never hide the error being reported
+        return first
+    others = [p for p in problems if p != str(first)]
+    if not others:
+        return first
+    lines = "\n".join(f"  {p}" for p in [str(first), *others])
+    return DataError(
+        f"{root}: {len(others) + 1} problems in the dataset "
+        f"(`intermask data check {root}` lists them again):\n{lines}"
+    )
 
 
 def _problem(err: DataError) -> DataProblem:
@@ -176,3 +206,74 @@ def _check_interx(
                     )
         _finish_split(report, layout.split_file(split), split, len(ids), usable)
     _check_meta(report, root, [i for ids in splits.values() for i in ids])
+
+
+def _statistics_file(path: Path) -> np.ndarray:
+    """A (263,) finite statistics array (Mean.npy or Std.npy); DataError naming the file."""
+    array = read_npy(path, what="statistics")
+    if tuple(array.shape) != (HML_FEATURE_DIM,):
+        raise DataError(f"{path}: expected shape ({HML_FEATURE_DIM},), got {tuple(array.shape)}")
+    if not np.issubdtype(array.dtype, np.floating) or not np.isfinite(array).all():
+        raise DataError(f"{path}: expected finite float values, got dtype {array.dtype} or NaN/Inf")
+    return array
+
+
+def _check_humanml3d_statistics(report: CheckReport, layout: hml.HumanML3DLayout) -> None:
+    mean, std = (_collect(report, _statistics_file, p) for p in (layout.mean_file, layout.std_file))
+    if mean is not None and std is not None:
+        _collect(report, partial(Normalizer, source=str(layout.std_file)), mean, std)  # std > 0
+
+
+def _check_tagged_captions(report: CheckReport, path: Path) -> bool:
+    """Every line of a HumanML3D caption file, each bad line a problem; True when all are good."""
+    lines = _collect(report, read_caption_lines, path)
+    if lines is None:
+        return False
+    parsed = [
+        _collect(report, hml.parse_tagged_caption, line, path, number)
+        for number, line in enumerate(lines, start=1)
+    ]
+    return all(caption is not None for caption in parsed)
+
+
+def _humanml3d_clip_frames(
+    report: CheckReport, layout: hml.HumanML3DLayout, split_file: Path, clip_id: str
+) -> int | None:
+    """Frames of a listed clip whose motion and caption files are good, else None (problems
+    recorded: an id without either file is one problem of its split file)."""
+    motion_file, caption_file = layout.motion_file(clip_id), layout.caption_file(clip_id)
+    if not motion_file.exists() and not caption_file.exists():
+        report.problems.append(
+            DataProblem(
+                split_file,
+                f"clip {clip_id!r} has no files (expected {motion_file} and {caption_file})",
+            )
+        )
+        return None
+    what = f"motion (listed in {split_file.name})"
+    load = partial(hml.load_npy, trailing=(HML_FEATURE_DIM,), what=what)
+    motion = _collect(report, load, motion_file)
+    captions_good = _check_tagged_captions(report, caption_file)
+    return len(motion) if motion is not None and captions_good else None
+
+
+def _check_humanml3d(
+    root: Path, report: CheckReport, min_length: int = 40, max_frames: int = 200
+) -> None:
+    """HumanML3D's release: Mean/Std, the split files, every listed clip's vectors and captions
+    (the reader's [min_length, max_frames) rule decides which clips are skipped)."""
+    layout = hml.HumanML3DLayout(root)
+    _check_humanml3d_statistics(report, layout)
+    splits = _read_splits(report, layout.split_file)
+    for split, ids in splits.items():
+        usable = 0
+        for clip_id in ids:
+            frames = _humanml3d_clip_frames(report, layout, layout.split_file(split), clip_id)
+            if frames is None:
+                continue
+            if min_length <= frames < max_frames:
+                usable += 1
+            else:
+                reason = f"{frames} frames, outside [{min_length}, {max_frames})"
+                report.skipped.append(SkippedClip(clip_id, reason))
+        _finish_split(report, layout.split_file(split), split, len(ids), usable)

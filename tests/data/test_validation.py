@@ -73,7 +73,7 @@ def test_interhuman_missing_split_and_root(tmp_path):
 def test_unknown_layout(tmp_path):
     (tmp_path / "something").mkdir()
     problems = messages(check_dataset(tmp_path))
-    assert len(problems) == 1 and "follows neither official layout" in problems[0]
+    assert len(problems) == 1 and "follows no official layout" in problems[0]
 
 
 def test_interx_every_problem_at_once(tmp_path):
