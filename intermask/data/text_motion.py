@@ -107,7 +107,10 @@ class TextMotionDataModule(EpochDataModule):
         try:
             super().setup(stage)
         except DataError as first:
-            raise all_problems_error(self.root, "humanml3d", first) from first
+            error = all_problems_error(self.root, "humanml3d", first)
+            if error is first:
+                raise
+            raise error from None  # the list holds the first error's message
 
     def load_normalizer(self) -> Normalizer:
         layout = HumanML3DLayout(self.root)
