@@ -59,6 +59,8 @@ from intermask.interm.sampler import decode_tokens
 from intermask.text.cache import TextFeatureCache
 from intermask.text.clip_encoder import padding_mask_from_eot
 from intermask.utils.precision import BF16, OPTIONS, PrecisionChoice, resolve_precision
+from intermask.utils.staging import write_text_atomically
+from intermask.utils.write_errors import reported_write_errors
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 from intermask.vq.module import VQVAEModule
 
@@ -553,10 +555,12 @@ def main(argv: list[str] | None = None) -> int:
         precision=args.precision,
         cuda_graphs=args.cuda_graphs,
     )
-    args.out.mkdir(parents=True, exist_ok=True)
     name = f"bench_{args.size}_{report.machine['device'].replace(':', '')}_{report.machine['threads']}t.json"
     path = args.out / name
-    path.write_text(json.dumps(asdict(report), indent=2) + "\n")
+    with reported_write_errors(
+        "python -m intermask.bench", fallback=path, elsewhere="choose another --out"
+    ):
+        write_text_atomically(path, json.dumps(asdict(report), indent=2) + "\n")
     print(f"written {path}")
     return 0
 

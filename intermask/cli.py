@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import pickle
 import re
+import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -38,23 +40,39 @@ def _resolve_format(root: Path, requested: str | None) -> str:
 
 def _data_synth(args: argparse.Namespace) -> int:
     from intermask.data.synthetic import generate_dataset
+    from intermask.data.synthetic.planning import check_folder
     from intermask.utils.run_record import write_run_record
+    from intermask.utils.staging import staged_outputs
 
     start = time.perf_counter()
-    summary = generate_dataset(args.out, format=args.format, clips=args.clips, seed=args.seed)
-    seconds = time.perf_counter() - start
-    write_run_record(
-        args.out,
-        extra={
-            "job": "data synth",
-            "format": args.format,
-            "clips": args.clips,
-            "seed": args.seed,
-            "seconds": round(seconds, 2),
-        },
-    )
+    earlier = check_folder(args.out)  # refused before any work
+    # written beside the folder and moved in when whole: a failure leaves the earlier dataset
+    with staged_outputs(args.out, None, replace=True) as staged:
+        summary = generate_dataset(staged, format=args.format, clips=args.clips, seed=args.seed)
+        seconds = time.perf_counter() - start
+        write_run_record(
+            staged,
+            extra={
+                "job": "data synth",
+                "format": args.format,
+                "clips": args.clips,
+                "seed": args.seed,
+                "seconds": round(seconds, 2),
+            },
+            folder=args.out,
+        )
+        written = set(os.listdir(staged))
+    for name in sorted(set(earlier) - written):  # the earlier dataset's (its statistics ...)
+        _remove_entry(args.out / name)
     print(f"wrote {summary} to {args.out} in {seconds:.1f} s")
     return 0
+
+
+def _remove_entry(path: Path) -> None:
+    if path.is_dir():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
 
 
 def _data_check(args: argparse.Namespace) -> int:
@@ -74,13 +92,16 @@ def _data_check(args: argparse.Namespace) -> int:
 
 
 def _data_stats(args: argparse.Namespace) -> int:
-    from intermask.data.normalization import default_stats_dir
+    from intermask.data.normalization import MEAN_FILE, PROVENANCE_FILE, STD_FILE, default_stats_dir
     from intermask.data.statistics import compute_and_save_stats
+    from intermask.utils.staging import staged_outputs
 
     root = Path(args.root)
     dataset_format = _resolve_format(root, args.format)
     out_dir = args.out or default_stats_dir(root)
-    compute_and_save_stats(root, dataset=dataset_format, split=args.split, out_dir=out_dir)
+    # the three files replace earlier statistics together, or not at all
+    with staged_outputs(out_dir, (MEAN_FILE, STD_FILE, PROVENANCE_FILE), replace=True) as staged:
+        compute_and_save_stats(root, dataset=dataset_format, split=args.split, out_dir=staged)
     print(
         f"normalization statistics of {root} ({dataset_format}, split {args.split}) written to {out_dir}"
     )

@@ -38,6 +38,8 @@ from intermask.interm.sampler import InteractionSampler, joints_from_features
 from intermask.metrics.interaction import interaction_success
 from intermask.motion.masks import length_mask
 from intermask.train import CONFIG_DIR, train
+from intermask.utils.staging import staged_outputs, write_text_atomically
+from intermask.utils.write_errors import reported_write_errors
 from intermask.vq.model import FRAMES_PER_STEP
 
 log = logging.getLogger(__name__)
@@ -84,15 +86,18 @@ class OverfitReport:
 
 def write_memorisation_set(out: Path, *, seed: int = 0) -> Path:
     """14 synthetic clips, one per action (the round-robin assignment of 14 clips), with every
-    split file listing all of them: train, validation and test are the same clips."""
-    summary = generate_dataset(out, format="interhuman", clips=len(ACTIONS), seed=seed)
-    if sorted(summary.action_counts.values()) != [1] * len(ACTIONS):
-        raise RuntimeError(f"expected one clip per action, got {summary.action_counts}")
-    ids = sorted(
-        {line.strip() for s in SPLITS for line in (out / "split" / f"{s}.txt").read_text().split()}
-    )
-    for split in SPLITS:
-        (out / "split" / f"{split}.txt").write_text("\n".join(ids) + "\n", encoding="utf-8")
+    split file listing all of them: train, validation and test are the same clips. Written
+    beside ``out`` and moved in when whole (replacing an earlier set)."""
+    out = Path(out)
+    with staged_outputs(out.parent, [out.name], replace=True) as staged:
+        data = staged / out.name
+        summary = generate_dataset(data, format="interhuman", clips=len(ACTIONS), seed=seed)
+        if sorted(summary.action_counts.values()) != [1] * len(ACTIONS):
+            raise RuntimeError(f"expected one clip per action, got {summary.action_counts}")
+        files = [data / "split" / f"{split}.txt" for split in SPLITS]
+        ids = sorted({line.strip() for path in files for line in path.read_text().split()})
+        for path in files:
+            path.write_text("\n".join(ids) + "\n", encoding="utf-8")
     return out
 
 
@@ -233,8 +238,8 @@ def run(
         clips=clips,
         seconds=seconds,
     )
-    (out / "overfit.json").write_text(
-        json.dumps(asdict(report) | {"successes": report.successes}, indent=2), encoding="utf-8"
+    write_text_atomically(
+        out / "overfit.json", json.dumps(asdict(report) | {"successes": report.successes}, indent=2)
     )
     return report
 
@@ -253,13 +258,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s] %(message)s")
-    report = run(
-        args.out,
-        seed=args.seed,
-        vq_overrides=args.vq,
-        gen_overrides=args.gen,
-        persons=args.persons,
-    )
+    with reported_write_errors(
+        "python -m intermask.overfit", fallback=args.out, elsewhere="choose another --out"
+    ):  # a re-run trains afresh: nothing to clean up by hand
+        report = run(
+            args.out,
+            seed=args.seed,
+            vq_overrides=args.vq,
+            gen_overrides=args.gen,
+            persons=args.persons,
+        )
     print(report.table())
     accuracy_ok = report.masked_accuracy > DEFAULT_ACCURACY
     return 0 if report.successes == len(report.clips) and accuracy_ok else 1

@@ -42,6 +42,8 @@ from intermask.momask.sampler import MoMaskSampler
 from intermask.motion.masks import length_mask
 from intermask.overfit import _compose
 from intermask.train import train
+from intermask.utils.staging import staged_outputs, write_text_atomically
+from intermask.utils.write_errors import reported_write_errors
 from intermask.vq.model import FRAMES_PER_STEP, MotionVQVAE
 
 log = logging.getLogger(__name__)
@@ -116,7 +118,15 @@ def write_momask_memorisation_set(out: Path, *, clips: int = DEFAULT_CLIPS, seed
     """The first ``clips`` synthetic HumanML3D-layout clips, every split listing all of them.
     Each clip is exactly one item with one crop: time-tagged caption lines are dropped and the
     clip is cut to whole token steps (a multiple of 4 frames), so the reader's crop always starts
-    at frame 0 (otherwise it starts anywhere in the 1-3 spare frames and the codes move)."""
+    at frame 0 (otherwise it starts anywhere in the 1-3 spare frames and the codes move).
+    Written beside ``out`` and moved in when whole (replacing an earlier set)."""
+    out = Path(out)
+    with staged_outputs(out.parent, [out.name], replace=True) as staged:
+        _write_momask_set(staged / out.name, clips=clips, seed=seed)
+    return out
+
+
+def _write_momask_set(out: Path, *, clips: int, seed: int) -> None:
     generate_humanml3d(out, clips=clips, seed=seed)
     layout = HumanML3DLayout(out)
     ids = [f"{index:06d}" for index in range(clips)]
@@ -130,7 +140,6 @@ def write_momask_memorisation_set(out: Path, *, clips: int = DEFAULT_CLIPS, seed
         lines = path.read_text(encoding="utf-8").splitlines()
         whole = [line for line in lines if _is_whole_clip(line)]
         path.write_text("\n".join(whole) + "\n", encoding="utf-8")
-    return out
 
 
 def _is_whole_clip(line: str) -> bool:
@@ -317,8 +326,8 @@ def run(
             for f in ("base_mm", "full_mm", "rvq_base_mm", "rvq_full_mm")
         },
     }
-    (out / "overfit_momask.json").write_text(
-        json.dumps(asdict(report) | summary, indent=2), encoding="utf-8"
+    write_text_atomically(
+        out / "overfit_momask.json", json.dumps(asdict(report) | summary, indent=2)
     )
     return report
 
@@ -337,14 +346,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s] %(message)s")
-    report = run(
-        args.out,
-        clips=args.clips,
-        seed=args.seed,
-        rvq_overrides=args.rvq,
-        mask_overrides=args.mask,
-        residual_overrides=args.residual,
-    )
+    with reported_write_errors(
+        "python -m intermask.overfit_momask", fallback=args.out, elsewhere="choose another --out"
+    ):
+        report = run(
+            args.out,
+            clips=args.clips,
+            seed=args.seed,
+            rvq_overrides=args.rvq,
+            mask_overrides=args.mask,
+            residual_overrides=args.residual,
+        )
     print(report.table())
     return 0 if report.passed else 1
 

@@ -19,6 +19,7 @@ from intermask.data.common import read_id_list
 from intermask.data.errors import DataError
 from intermask.motion.interx import to_joint_positions
 from intermask.motion.kinds import DatasetKind, check_dataset_kind
+from intermask.utils.staging import write_atomically
 
 
 class ExportedItem(NamedTuple):
@@ -81,16 +82,20 @@ def export_item(
     out_path = Path(out_path)
     if out_path.suffix != ".npz":  # np.savez would append it anyway
         out_path = out_path.with_name(out_path.name + ".npz")
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(
-        out_path,
-        features=features.numpy(),
-        joints=joints.numpy(),
-        length=np.int64(features.shape[1]),
-        captions=np.array(captions),
-        id=np.array(clip_id),
-        format=np.array(format),
-    )
+    arrays = {
+        "features": features.numpy(),
+        "joints": joints.numpy(),
+        "length": np.int64(features.shape[1]),
+        "captions": np.array(captions),
+        "id": np.array(clip_id),
+        "format": np.array(format),
+    }
+
+    def write(temporary: Path) -> None:
+        with temporary.open("wb") as handle:  # a handle: np.savez adds no suffix
+            np.savez(handle, **arrays)
+
+    write_atomically(out_path, write)  # the old file or the new one, never half of it
     return ExportedItem(
         out_path, features.numpy(), joints.numpy(), int(features.shape[1]), captions
     )

@@ -26,9 +26,10 @@ REPLACED = ".replaced"  # inside the staging folder: what ``replace`` moved asid
 
 @contextmanager
 def staged_outputs(
-    out: str | Path, names: Sequence[str], *, replace: bool = False
+    out: str | Path, names: Sequence[str] | None, *, replace: bool = False
 ) -> Iterator[Path]:
-    """Yield a temporary sibling of ``out``; write ``<yielded>/<name>`` for each of ``names``.
+    """Yield a temporary sibling of ``out``; write ``<yielded>/<name>`` for each of ``names``
+    (None: whatever the block writes there, with ``replace`` only).
 
     Raises FileExistsError (before anything is written) when ``out/<name>`` exists already
     (unless ``replace``: then it is replaced when the block succeeds, kept when it fails), or
@@ -37,6 +38,8 @@ def staged_outputs(
     out = Path(out).absolute()
     if out.exists() and not out.is_dir():
         raise FileExistsError(f"{out} exists and is not a folder")
+    if names is None and not replace:
+        raise ValueError("staged_outputs: names=None (whatever is written) needs replace=True")
     for name in () if replace else names:
         if (out / name).exists():
             raise FileExistsError(
@@ -48,7 +51,8 @@ def staged_outputs(
     try:
         staging.mkdir()
         yield staging
-        _move_into_place(staging, out, names)
+        written = sorted(os.listdir(staging)) if names is None else names
+        _move_into_place(staging, out, written)
     except BaseException as error:
         _name_in_place(error, staging, out)
         raise

@@ -73,16 +73,22 @@ def _is_synthetic(meta: Path) -> bool:
         return False
 
 
-def prepare_folder(out: Path) -> None:
-    """Create `out`; clear it if it holds an earlier synthetic dataset; refuse anything else."""
+def check_folder(out: Path) -> list[str]:
+    """Refuse (FileExistsError) an `out` that is not missing, empty or an earlier synthetic
+    dataset -> the entries of that dataset (and of statistics computed from it) in `out`."""
     if out.exists() and not out.is_dir():
         raise FileExistsError(f"{out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()):
-        if not _is_synthetic(out / META_FILE):
-            raise FileExistsError(
-                f"{out} is not empty and holds no synthetic dataset (no {META_FILE} with format "
-                f"{META_FORMAT!r}); choose an empty folder"
-            )
+    if out.is_dir() and any(out.iterdir()) and not _is_synthetic(out / META_FILE):
+        raise FileExistsError(
+            f"{out} is not empty and holds no synthetic dataset (no {META_FILE} with format "
+            f"{META_FORMAT!r}); choose an empty folder"
+        )
+    return [name for name in _OWN_ENTRIES if (out / name).exists()]
+
+
+def prepare_folder(out: Path) -> None:
+    """Create `out`; clear it if it holds an earlier synthetic dataset; refuse anything else."""
+    if check_folder(out):
         for name in _OWN_ENTRIES:
             path = out / name
             if path.is_dir():
