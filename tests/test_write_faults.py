@@ -142,6 +142,24 @@ def test_a_checkpoint_that_does_not_fit_stops_training_in_one_line_and_the_run_r
     assert leftovers(run) == [] and sorted(p.name for p in cwd.iterdir()) == []
 
 
+def test_a_run_folder_under_a_file_is_refused_before_hydra_writes_there(
+    synthetic_interhuman_root, tmp_path
+):
+    """Hydra writes its record before the job runs: the run folder check (a Hydra callback)
+    says what is wrong first, and creates nothing."""
+    cwd = _elsewhere(tmp_path)
+    (tmp_path / "outputs").write_text("keep me")
+    failed = run_command(_train_vq(synthetic_interhuman_root, tmp_path / "outputs" / "run"), cwd)
+    _assert_reported(
+        failed,
+        f"python -m intermask.train: error: {tmp_path / 'outputs'}: a file is in the way where "
+        "a folder is needed; move that file away or choose another hydra.run.dir, then run the "
+        "command again",
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["elsewhere", "outputs"]
+    assert (tmp_path / "outputs").read_text() == "keep me" and list(cwd.iterdir()) == []
+
+
 def _evaluate(data_root: Path, runs: dict[str, Path], out: Path) -> list[str]:
     return [PYTHON, "-m", "intermask.evaluate", "data=synthetic", f"data.root={data_root}",
             "data.num_workers=0", "split=val", "mode=reconstruction",

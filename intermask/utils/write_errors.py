@@ -17,6 +17,7 @@ error they raise, so the path reported is where the output was to go, not a temp
 from __future__ import annotations
 
 import errno
+import os
 import re
 import sys
 from collections.abc import Iterator
@@ -85,10 +86,23 @@ def describe(
     found = write_error_in(error)
     if found is None:
         return None
-    what, remedy = PROBLEMS[problem_errno(found)]
+    code = problem_errno(found)
+    what, remedy = PROBLEMS[code]
     path = found.filename if found.filename is not None else fallback
+    if code in (errno.ENOTDIR, errno.EEXIST) and path is not None:
+        path = _file_in_the_way(Path(os.fsdecode(path)))
     remedy = f"{remedy} or {elsewhere}" if elsewhere else remedy
     return f"{path or 'the output folder'}: {what}; {remedy}, then {then}"
+
+
+def _file_in_the_way(path: Path) -> Path:
+    """``path`` or the first of its folders that is a file (what a mkdir stumbled on)."""
+    for candidate in (path, *path.parents):
+        if candidate.is_dir():
+            return path
+        if candidate.exists():
+            return candidate
+    return path
 
 
 @contextmanager
