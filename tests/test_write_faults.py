@@ -190,6 +190,26 @@ def test_an_evaluation_table_that_does_not_fit_is_not_written_and_the_same_comma
     assert sorted(p.name for p in cwd.iterdir()) == []
 
 
+def test_data_synth_on_a_full_disk_keeps_the_earlier_dataset_and_then_replaces_it(tmp_path):
+    """The disk fills at the last file (README.txt): the earlier dataset stays as it was."""
+    cwd = _elsewhere(tmp_path)
+    command = [CONSOLE, "data", "synth", "--out", "data", "--format", "interhuman", "--clips"]
+    assert run_command([*command, "6"], cwd).returncode == 0
+    before = {p: p.read_bytes() for p in (cwd / "data").rglob("*") if p.is_file()}
+    failed = run_command([*command, "8"], cwd, fault="ENOSPC:1:*/README.txt")
+    _assert_reported(
+        failed,
+        f"intermask data: error: {cwd / 'data'}: {FULL} or choose another --out, then run the "
+        "command again",
+    )
+    assert {p: p.read_bytes() for p in (cwd / "data").rglob("*") if p.is_file()} == before
+    assert sorted(p.name for p in cwd.iterdir()) == ["data"]
+    done = run_command([*command, "8"], cwd)
+    assert done.returncode == 0, done.stderr
+    assert "wrote 8 synthetic interhuman clips" in done.stdout
+    assert leftovers(cwd) == [] and sorted(p.name for p in cwd.iterdir()) == ["data"]
+
+
 def _mount_tmpfs(folder: Path, size: str) -> None:
     folder.mkdir()
     try:
