@@ -123,7 +123,13 @@ def _read_arrays(path: Path) -> dict[str, object]:
     suffix = path.suffix.lower()
     try:
         if suffix == ".npz":
-            with np.load(path, allow_pickle=False) as archive:
+            loaded = np.load(path, allow_pickle=False)
+            if not isinstance(loaded, np.lib.npyio.NpzFile):  # a .npy array under .npz
+                raise BodyModelError(
+                    f"{path}: not a body-model archive: it holds one array of shape "
+                    f"{tuple(loaded.shape)}, not the model's keys"
+                )
+            with loaded as archive:
                 return {key: archive[key] for key in archive.files if key in REQUIRED_KEYS}
         if suffix == ".pkl":
             with path.open("rb") as handle:

@@ -182,6 +182,13 @@ def test_malformed_files_name_the_file(tmp_path):
     (tmp_path / "c.pkl").write_bytes(b"\x80\x02cchumpy.ch\nCh\nq\x00)\x81q\x01.")
     with pytest.raises(BodyModelError, match=r"c.pkl: this pickle holds chumpy objects"):
         load_body_model(tmp_path / "c.pkl")
+    np.save(tmp_path / "e.npy", np.zeros((4, 2, 22, 3)))  # a joints.npy saved under .npz
+    (tmp_path / "e.npy").rename(tmp_path / "e.npz")
+    with pytest.raises(
+        BodyModelError,
+        match=r"e.npz: not a body-model archive: it holds one array of shape \(4, 2, 22, 3\)",
+    ):
+        load_body_model(tmp_path / "e.npz")
     (tmp_path / "d.obj").write_text("v 0 0 0")
     with pytest.raises(BodyModelError, match=r"d.obj: body-model files are .npz or .pkl"):
         load_body_model(tmp_path / "d.obj")
