@@ -56,17 +56,58 @@ def _on(batch: dict[str, Any], device: torch.device) -> dict[str, Any]:
 
 def build_sources(
     cfg: DictConfig, normalizer, device: torch.device
-) -> tuple[list[MotionSource], dict[str, str]]:
+) -> tuple[list[MotionSource], dict[str, Any]]:
     """The rows after the GT row for ``cfg.mode`` -> (sources, {checkpoint role: 'path (hash)'}).
 
     interaction: InterMask from ``gen_ckpt`` (after its VQ-VAE's reconstruction row when
     ``reconstruction_row``); reaction: InterMask's reaction mode from
     ``gen_ckpt`` and / or ARFlow from ``arflow_ckpt`` (its steps, guidance and step-ablation
-    rows); reconstruction: the VQ-VAE of ``vq_ckpt``.
+    rows); reconstruction: the VQ-VAE of ``vq_ckpt``. Then the rows of ``rows`` (:func:`user_rows`).
     """
+    checkpoints: dict[str, Any] = {}
+    sources = _builtin_sources(cfg, normalizer, device, checkpoints)
+    sources += user_rows(cfg, normalizer, device, checkpoints)
+    names = [source.name for source in sources]
+    repeated = sorted(
+        {name for name in names if names.count(name) > 1} | {"Ground Truth"} & set(names)
+    )
+    if repeated:
+        raise ValueError(f"two rows of the table would be named {repeated}: name each row apart")
+    return sources, checkpoints
+
+
+def user_rows(cfg: DictConfig, normalizer, device: torch.device, checkpoints) -> list[MotionSource]:
+    """``rows``: rows of your own (docs/extending.md), each built by its config's ``_target_``
+    with ``device`` (the evaluation's) and ``normalizer`` (the dataset's, or None); its
+    resolved config goes into the results' header as ``rows.<key>``."""
+    rows: list[MotionSource] = []
+    for key, spec in (cfg.get("rows") or {}).items():
+        if spec is None:  # switched off: rows.<key>=null
+            continue
+        if not isinstance(spec, DictConfig) or "_target_" not in spec:
+            raise ValueError(
+                f"rows.{key}: expected a config with a _target_ (the function or class that "
+                f"builds the row), got {OmegaConf.to_container(spec) if isinstance(spec, DictConfig) else spec!r}"
+            )
+        row = instantiate(spec, device=device, normalizer=normalizer)
+        if not isinstance(row, MotionSource):
+            raise TypeError(
+                f"rows.{key}: {spec._target_} returned a {type(row).__name__}, not a MotionSource "
+                "(intermask.evaluation.protocol)"
+            )
+        checkpoints[f"rows.{key}"] = OmegaConf.to_container(spec, resolve=True)
+        rows.append(row)
+    return rows
+
+
+def _builtin_sources(
+    cfg: DictConfig, normalizer, device: torch.device, checkpoints: dict[str, Any]
+) -> list[MotionSource]:
+    """The rows the framework builds for ``cfg.mode`` (see :func:`build_sources`); none when
+    only ``rows`` of your own are given."""
     from intermask.vq.load import load_vq
 
-    checkpoints: dict[str, str] = {}
+    own_rows = any(spec is not None for spec in (cfg.get("rows") or {}).values())
     single_person = cfg.data.dataset in SINGLE_PERSON
     if single_person and cfg.mode not in ("text_to_motion", "reconstruction"):
         raise ValueError(
@@ -78,6 +119,8 @@ def build_sources(
             f"mode=text_to_motion needs single-person data (data=humanml3d), got {cfg.data.dataset}"
         )
     if cfg.mode == "reconstruction":
+        if not cfg.vq_ckpt and own_rows:
+            return []
         if not cfg.vq_ckpt:
             raise ValueError(
                 "mode=reconstruction needs vq_ckpt=<train_vq run or its checkpoints/*.ckpt>"
@@ -86,10 +129,14 @@ def build_sources(
         checkpoints["vq"] = f"{vq_path} ({file_hash(vq_path)})"
         vq = load_vq(vq_path).to(device)
         row = SoloReconstruction(vq=vq) if single_person else VQReconstruction(vq=vq)
-        return [row], checkpoints
+        return [row]
     if cfg.mode == "text_to_motion":
-        return _momask_rows(cfg, device, checkpoints), checkpoints
+        if not cfg.mask_ckpt and own_rows:
+            return []
+        return _momask_rows(cfg, device, checkpoints)
     arflow_ckpt = cfg.get("arflow_ckpt") if cfg.mode == "reaction" else None
+    if not cfg.gen_ckpt and not arflow_ckpt and own_rows:
+        return []
     if not cfg.gen_ckpt and not arflow_ckpt:
         wanted = "gen_ckpt=<train_gen run or .ckpt>"
         if cfg.mode == "reaction":
@@ -100,7 +147,7 @@ def build_sources(
         sources += _intermask_rows(cfg, normalizer, device, checkpoints)
     if arflow_ckpt:
         sources += _arflow_rows(cfg, normalizer, device, checkpoints)
-    return sources, checkpoints
+    return sources
 
 
 def _momask_rows(cfg: DictConfig, device, checkpoints) -> list[MotionSource]:
@@ -262,10 +309,12 @@ def _check_config(cfg: DictConfig) -> str:
     order = cfg.get("order", "batched")
     if order not in ORDERS:
         raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
-    if order == "reference" and (cfg.mode != "interaction" or cfg.reconstruction_row):
+    own_rows = sorted(key for key, spec in (cfg.get("rows") or {}).items() if spec is not None)
+    if order == "reference" and (cfg.mode != "interaction" or cfg.reconstruction_row or own_rows):
         raise ValueError(
             "order=reference replays the authors' eval.py loop: mode=interaction without "
-            f"reconstruction_row, got mode={cfg.mode}, reconstruction_row={cfg.reconstruction_row}"
+            f"reconstruction_row or rows of your own, got mode={cfg.mode}, reconstruction_row="
+            f"{cfg.reconstruction_row}, rows={own_rows}"
         )
     unknown = sorted(set(cfg.penetration.modes) - set(MODES))
     if unknown:

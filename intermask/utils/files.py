@@ -64,6 +64,19 @@ class RunCheckpoint:
     def stored(self) -> dict[str, Any]:
         return read_checkpoint_file(self.checkpoint, map_location=self.map_location)
 
+    def text(self) -> Any:
+        """The run's frozen text tower (a :class:`~intermask.text.cache.TextFeatureCache` from its
+        ``text`` config, checked against the loadable targets and found from the run folder
+        wherever the tree moved)."""
+        from hydra.utils import instantiate
+
+        from intermask.utils.run_config import check_targets
+
+        if "text" not in self.config:
+            raise ValueError(f"{self.config_path}: the run config has no text section")
+        config = check_targets(self.config.text, source=self.config_path, section="text")
+        return instantiate(self.location.relocated(config))
+
     def weights(self, prefix: str = "") -> dict[str, Any]:
         """The state dict entries under ``prefix``, with the prefix removed."""
         state = self.stored["state_dict"]
