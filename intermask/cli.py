@@ -253,7 +253,25 @@ def _convert_reference(args: argparse.Namespace) -> int:
     return 0
 
 
+def _generate_defaults() -> tuple[dict, dict, dict]:
+    """The values ``intermask generate`` falls back to, read from their one owner, the configs
+    (configs/generate.yaml, configs/sampler/paper.yaml, configs/sampler/momask.yaml), so that the
+    help says what a run will take. Plain YAML reads: ``intermask --help`` stays quick."""
+    import yaml
+
+    from intermask.config_files import config_dir
+
+    root = config_dir()
+
+    def read(name: str) -> dict:
+        return yaml.safe_load((root / name).read_text(encoding="utf-8"))
+
+    generate = {k: v for k, v in read("generate.yaml").items() if k != "defaults"}
+    return generate, read("sampler/paper.yaml"), read("sampler/momask.yaml")
+
+
 def _add_generate_parser(commands) -> None:
+    defaults, _, _ = _generate_defaults()
     parser = commands.add_parser(
         "generate",
         help="captions -> two-person interactions or one-person motions (npy, JSON, GIF, MP4, "
@@ -261,7 +279,7 @@ def _add_generate_parser(commands) -> None:
         description="Defaults come from configs/generate.yaml and configs/sampler/ (paper.yaml; "
         "MoMask: momask.yaml). The kind of run is read from its config.yaml: an Inter-M run "
         "generates two persons, a MoMask masked transformer run (with --residual, its residual "
-        "transformer run) one HumanML3D person at 20 fps.",
+        f"transformer run) one HumanML3D person at {defaults['momask_fps']:g} fps.",
     )
     parser.add_argument(
         "--checkpoint",
@@ -276,14 +294,28 @@ def _add_generate_parser(commands) -> None:
     parser.add_argument("--text", action="append", help="a caption (repeat for several)")
     parser.add_argument("--prompts", help="file with one caption per line")
     length = parser.add_mutually_exclusive_group()
-    length.add_argument("--seconds", type=_positive_float, help="length in seconds (default 4)")
+    length.add_argument(
+        "--seconds",
+        type=_positive_float,
+        help=f"length in seconds (default {defaults['seconds']:g})",
+    )
     length.add_argument("--length-frames", type=_positive_int, help="length in frames")
-    parser.add_argument("--samples", type=_positive_int, help="samples per caption (default 1)")
-    parser.add_argument("--seed", type=int, help="first seed (default 0)")
-    sampler_options = _add_decoding_options(parser)
-    parser.add_argument("--batch-size", type=_positive_int, help="samples per forward batch (32)")
     parser.add_argument(
-        "--fps", type=_positive_float, help="frame rate of the dataset (30; MoMask 20)"
+        "--samples",
+        type=_positive_int,
+        help=f"samples per caption (default {defaults['samples']})",
+    )
+    parser.add_argument("--seed", type=int, help=f"first seed (default {defaults['seed']})")
+    sampler_options = _add_decoding_options(parser)
+    parser.add_argument(
+        "--batch-size",
+        type=_positive_int,
+        help=f"samples per forward batch ({defaults['batch_size']})",
+    )
+    parser.add_argument(
+        "--fps",
+        type=_positive_float,
+        help=f"frame rate of the dataset ({defaults['fps']:g}; MoMask {defaults['momask_fps']:g})",
     )
     parser.add_argument("--reaction", help="reference person's motion: person 1 stays fixed")
     parser.add_argument("--edit", help="two-person motion to edit (needs --frames)")
@@ -295,11 +327,11 @@ def _add_generate_parser(commands) -> None:
     parser.add_argument(
         "--precision",
         choices=("32", "bf16", "auto"),  # intermask.utils.precision.OPTIONS (torch-free here)
-        help="Inter-M decoding: 32 (the default), bf16 autocast (other numbers; recorded in "
-        "sample.json) or auto (bf16 where the device has native bf16)",
+        help="Inter-M decoding: 32, bf16 autocast (other numbers; recorded in sample.json) or "
+        f"auto (bf16 where the device has native bf16); default {defaults['precision']}",
     )
     parser.add_argument(
-        "--out", type=_output_folder, help="output folder (default outputs/generate)"
+        "--out", type=_output_folder, help=f"output folder (default {defaults['out']})"
     )
     parser.add_argument("--no-render", action="store_true", help="write arrays and JSON only")
     add_generate_body_options(parser)
@@ -308,69 +340,82 @@ def _add_generate_parser(commands) -> None:
 
 def _add_decoding_options(parser: argparse.ArgumentParser) -> tuple[str, ...]:
     """The decoding settings of ``intermask generate`` -> their names, the keys of the sampler
-    configs (configs/sampler/; ``--cfg-scale`` is MoMask's ``mask_cfg_scale``)."""
+    configs (configs/sampler/; ``--cfg-scale`` is MoMask's ``mask_cfg_scale``), whose values the
+    help gives."""
+    generate, paper, momask = _generate_defaults()
     add = parser.add_argument
     options = [
         add(
             "--cfg-scale",
             type=_non_negative_float,
-            help="classifier-free guidance scale (2; MoMask: the masked transformer's, 4)",
+            help=f"classifier-free guidance scale ({paper['cfg_scale']:g}; MoMask: the masked "
+            f"transformer's, {momask['mask_cfg_scale']:g})",
         ),
         add(
             "--residual-cfg-scale",
             type=_non_negative_float,
-            help="MoMask: the residual transformer's guidance scale (5)",
+            help=f"MoMask: the residual transformer's guidance scale "
+            f"({momask['residual_cfg_scale']:g})",
         ),
         add(
             "--iterations",
             type=_positive_int,
-            help="decoding iterations (20; reaction 12; MoMask 10)",
+            help=f"decoding iterations ({paper['iterations']}; reaction "
+            f"{generate['reaction_iterations']}; MoMask {momask['iterations']})",
         ),
         add(
             "--schedule",
             choices=("paper", "reference"),
-            help="re-masking counts: the paper's (default) or the reference code's "
-            "(docs/fidelity.md)",
+            help="re-masking counts: the paper's or the reference code's (docs/fidelity.md; "
+            f"default {paper['schedule']})",
         ),
         add(
             "--noise",
             choices=("per_sample", "reference"),
-            help="sampling draws: one generator per sample (default) or the reference code's",
+            help="sampling draws: one generator per sample or the reference code's (default "
+            f"{paper['noise']})",
         ),
         add(
             "--persons",
             choices=("together", "in_turn"),
-            help="both persons every pass (default, the paper) or person A first, then B given A",
+            help="both persons every pass (the paper) or person A first, then B given A (default "
+            f"{paper['persons']})",
         ),
         add(
             "--revisits",
             type=_non_negative_int,
-            help="in_turn only: extra turns that re-decode A given B, then B given the new A (0)",
+            help="in_turn only: extra turns that re-decode A given B, then B given the new A "
+            f"({paper['revisits']})",
         ),
         add(
             "--partner-scale",
             type=_non_negative_float,
             help="in_turn or --reaction: partner guidance, how much further a person follows "
-            "what the other's tokens add to its prediction (0, the paper)",
+            f"what the other's tokens add to its prediction ({paper['partner_scale']:g})",
         ),
         add(
             "--remask-noise",
             type=_non_negative_float,
             help="re-mask by log confidence plus Gumbel noise of this scale, fading over the "
-            "iterations (MaskGIT; 0, the paper)",
+            f"iterations (MaskGIT; {paper['remask_noise']:g})",
         ),
         add(
             "--top-k",
             dest="top_k_ratio",
             metavar="TOP_K",
             type=_ratio,
-            help="top-k ratio of codes kept, in (0, 1] (0.1)",
+            help=f"top-k ratio of codes kept, in (0, 1] ({paper['top_k_ratio']:g})",
         ),
-        add("--temperature", type=_positive_float, help="sampling temperature (1)"),
+        add(
+            "--temperature",
+            type=_positive_float,
+            help=f"sampling temperature ({paper['temperature']:g})",
+        ),
         add(
             "--residual-temperature",
             type=_non_negative_float,
-            help="MoMask: the residual layers' sampling temperature (0: greedy, the default)",
+            help="MoMask: the residual layers' sampling temperature, 0 greedy "
+            f"({momask['residual_temperature']:g})",
         ),
     ]
     return tuple(option.dest for option in options)

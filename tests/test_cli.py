@@ -75,3 +75,46 @@ def test_unknown_root_is_a_one_line_error(tmp_path, capsys):
     assert main(["data", "check", str(tmp_path / "nowhere")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("intermask data: error:") and "nowhere" in err and "Traceback" not in err
+
+
+def test_the_generate_help_gives_the_values_of_the_configs(monkeypatch, tmp_path):
+    """The help's defaults are read from configs/generate.yaml and configs/sampler/ (their one
+    owner): a changed config changes the help."""
+    import argparse
+    import shutil
+
+    import intermask.config_files
+    from intermask.cli import build_parser
+
+    def generate_help() -> str:
+        parser = build_parser()
+        commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        return " ".join(commands.choices["generate"].format_help().split())
+
+    shipped = generate_help()
+    for text in (
+        "length in seconds (default 4)",
+        "samples per forward batch (32)",
+        "decoding iterations (20; reaction 12; MoMask 10)",
+        "guidance scale (2; MoMask: the masked transformer's, 4)",
+        "frame rate of the dataset (30; MoMask 20)",
+        "(default together)",
+    ):
+        assert text in shipped, text
+    configs = tmp_path / "configs"
+    shutil.copytree(intermask.config_files.config_dir(), configs)
+    for name, old, new in (
+        ("generate.yaml", "seconds: 4.0", "seconds: 6.5"),
+        ("generate.yaml", "reaction_iterations: 12", "reaction_iterations: 9"),
+        ("sampler/paper.yaml", "iterations: 20", "iterations: 25"),
+        ("sampler/paper.yaml", "cfg_scale: 2.0", "cfg_scale: 2.5"),
+        ("sampler/momask.yaml", "iterations: 10", "iterations: 12"),
+    ):
+        path = configs / name
+        assert old in path.read_text(), (name, old)
+        path.write_text(path.read_text().replace(old, new, 1))
+    monkeypatch.setattr(intermask.config_files, "config_dir", lambda: configs)
+    changed = generate_help()
+    assert "length in seconds (default 6.5)" in changed
+    assert "decoding iterations (25; reaction 9; MoMask 12)" in changed
+    assert "guidance scale (2.5; MoMask: the masked transformer's, 4)" in changed

@@ -48,8 +48,8 @@ def test_the_page_gives_every_file_it_lists_and_each_parses():
 
 def _clone_after_demo(project: Path) -> None:
     """``project`` as a clone after ``make demo``: the clone's Makefile and environment, the
-    demo's synthetic data (400 clips here: 40 test clips) and tiny evaluator, tokenizer and
-    generator runs in outputs/demo."""
+    demo's synthetic data (700 clips here: 70 test clips, two evaluation batches of 32, as
+    Diversity's 64 pairs need) and tiny evaluator, tokenizer and generator runs in outputs/demo."""
     from test_runs_move import _gen_config
     from test_train_evaluator import TINY_INTERCLIP
     from test_train_evaluator import _config as evaluator_config
@@ -62,7 +62,7 @@ def _clone_after_demo(project: Path) -> None:
     for name in CLONE_FILES:
         (project / name).symlink_to(REPO / name)
     data = project / "data" / "synthetic" / "interhuman"
-    generate_dataset(data, format="interhuman", clips=400, seed=0)
+    generate_dataset(data, format="interhuman", clips=700, seed=0)
     demo = project / "outputs" / "demo"
     train(vq_config(data, demo / "vq"))
     train(_gen_config(data, demo / "vq" / "checkpoints" / "last.ckpt", demo / "gen"))
