@@ -541,8 +541,8 @@ def _user_error(error: Exception, args: argparse.Namespace) -> str | None:
     do (:mod:`intermask.utils.write_errors`); data and checkpoint problems name the file."""
     from intermask.utils.write_errors import describe
 
-    out = getattr(args, "out", None)
-    message = describe(error, fallback=out, elsewhere="choose another --out" if out else "")
+    elsewhere = "choose another --out" if hasattr(args, "out") else ""
+    message = describe(error, fallback=getattr(args, "out", None), elsewhere=elsewhere)
     if message is not None:
         return message
     if isinstance(error, (FileNotFoundError, FileExistsError, ValueError, pickle.UnpicklingError)):
