@@ -190,10 +190,14 @@ def _generate(args: argparse.Namespace) -> int:
     options = vars(args)
     sampler = {name: options[name] for name in args.sampler_options if options[name] is not None}
     fields = {name: options[name] for name in gen.Request.__dataclass_fields__ if name in options}
-    folders = gen.run(gen.Request(**fields, sampler=sampler))
-    from intermask.body.command import generate_bodies
+    finish = None
+    if args.body_model is not None:  # bodies, .glb and meshes (docs/bodies.md), inside the staging
+        from intermask.body.command import generate_bodies
 
-    generate_bodies(args, folders)  # --body-model: bodies, .glb and meshes (docs/bodies.md)
+        def finish(staged, final):
+            generate_bodies(args, staged, shown=final)
+
+    gen.run(gen.Request(**fields, sampler=sampler, finish=finish))
     return 0
 
 

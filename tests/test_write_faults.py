@@ -258,3 +258,31 @@ def test_write_errors_are_told_apart_from_other_errors():
     assert describe(quota).startswith("/home/me/out/a.npy: disk quota exceeded;")
     assert describe(FileNotFoundError(errno.ENOENT, "No such file", "x")) is None
     assert describe(ValueError("bad value")) is None
+
+
+def test_generate_with_bodies_on_a_full_disk_leaves_no_sample_and_then_works(runs, tmp_path):
+    """--body-model writes the bodies into the staged sample folders: a .glb that does not fit
+    (after every sample's arrays, renders and fit) leaves no folder; then the command works."""
+    from intermask.body.standin import write_standin_model
+
+    models = tmp_path / "models"
+    write_standin_model(models, "smplx")
+    cwd = _elsewhere(tmp_path)
+    command = [*_generate(runs, "out"), "--no-render", "--body-model", models]
+    failed = run_command(command, cwd, fault="ENOSPC:1:*/bodies.glb")
+    _assert_reported(
+        failed,
+        f"intermask generate: error: {cwd / 'out'}: {FULL} or choose another --out, then run "
+        "the command again",
+    )
+    assert sorted(p.name for p in cwd.iterdir()) == []
+    missing = run_command([*command[:-1], models / "SMPLX_FEMALE.npz"], cwd)
+    assert missing.returncode == 2 and "SMPLX_FEMALE.npz" in missing.stderr, missing.stderr
+    assert sorted(p.name for p in cwd.iterdir()) == []  # a missing body model: no folder either
+    done = run_command(command, cwd)
+    assert done.returncode == 0, done.stderr
+    for folder in sorted((cwd / "out").iterdir()):
+        assert (folder / "bodies.glb").stat().st_size > 1000, folder
+        assert json.loads((folder / "body_fit.json").read_text())["persons"] == 2
+    assert "out/two_people_hug_00-00: body_person1.npz" in done.stdout  # its place, not staged
+    assert leftovers(cwd) == []

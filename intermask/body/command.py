@@ -67,8 +67,10 @@ def write_bodies(
     device: str = "cpu",
     settings: FitSettings | None = None,
     viewer: bool = True,
+    shown: Sequence[Path] | None = None,
 ) -> None:
-    """Body files for each sample folder (intermask.body.sample.body_outputs), one line each."""
+    """Body files for each sample folder (intermask.body.sample.body_outputs), one line each
+    naming the folder (or its entry of ``shown``)."""
     from intermask.body.model import load_body_model
     from intermask.body.sample import body_outputs
 
@@ -84,9 +86,9 @@ def write_bodies(
             device=device,
             dtype=torch.float64 if device == "cpu" else torch.float32,
         )
-    for folder in folders:
+    for folder, name in zip(folders, shown or folders, strict=True):
         paths = body_outputs(folder, model, settings=settings, viewer=viewer)
-        print(f"{folder}: {', '.join(path.name for path in paths.values())}")
+        print(f"{name}: {', '.join(path.name for path in paths.values())}")
 
 
 def run_body(args: argparse.Namespace) -> int:
@@ -118,8 +120,11 @@ def add_generate_body_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--body-gender", choices=GENDERS, help="default: the file's")
 
 
-def generate_bodies(args: argparse.Namespace, folders: Sequence[Path]) -> None:
-    """After ``intermask generate``: the bodies of its sample folders when --body-model is given."""
+def generate_bodies(
+    args: argparse.Namespace, folders: Sequence[Path], *, shown: Sequence[Path] | None = None
+) -> None:
+    """``intermask generate``: the bodies of its sample folders when --body-model is given
+    (``shown``: the names printed for ``folders``, the places a staged write moves them to)."""
     if getattr(args, "body_model", None) is not None:
         device = getattr(args, "device", None) or "cpu"
         write_bodies(
@@ -129,6 +134,7 @@ def generate_bodies(args: argparse.Namespace, folders: Sequence[Path]) -> None:
             gender=args.body_gender,
             device=device,
             viewer=not getattr(args, "no_render", False),
+            shown=shown,
         )
 
 

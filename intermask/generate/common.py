@@ -68,6 +68,10 @@ class Request:
     precision: str | None = None  # 32 | bf16 | auto
     out: Path | None = None
     no_render: bool = False
+    # more files for the sample folders, written before they are moved into place (so that a
+    # failure leaves no folder): called with (the staged folders, the folders they become);
+    # --body-model's bodies and .glb (intermask.body.command.generate_bodies)
+    finish: Callable[[Sequence[Path], Sequence[Path]], None] | None = None
 
     def given(self, name: str) -> bool:
         """Whether option ``name`` (a field, or a decoding setting) was given."""

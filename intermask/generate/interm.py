@@ -338,5 +338,7 @@ def run(request: Request, defaults: dict[str, Any], target: str) -> list[Path]:
                 f"seed {sample.seed}, {sample.caption or '(no text)'!r} -> "
                 f"{', '.join(sorted(paths))}"
             )
+        if request.finish is not None:
+            request.finish([staged / folder.name for folder in folders], folders)
     print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
     return folders

@@ -210,5 +210,7 @@ def run(request: Request, defaults: dict[str, Any], target: str) -> list[Path]:
                 f"{directory}: MoMask ({layers}), {frames} frames ({frames / job.fps:.1f} s), "
                 f"seed {sample.seed}, {sample.caption!r} -> {', '.join(sorted(paths))}"
             )
+        if request.finish is not None:
+            request.finish([staged / folder.name for folder in folders], folders)
     print(f"{len(samples)} sample(s) in {time.perf_counter() - start:.1f} s under {out}")
     return folders
