@@ -190,14 +190,11 @@ def _generate(args: argparse.Namespace) -> int:
     options = vars(args)
     sampler = {name: options[name] for name in args.sampler_options if options[name] is not None}
     fields = {name: options[name] for name in gen.Request.__dataclass_fields__ if name in options}
-    finish = None
-    if args.body_model is not None:  # bodies, .glb and meshes (docs/bodies.md), inside the staging
-        from intermask.body.command import generate_bodies
+    from intermask.body.command import body_finisher
 
-        def finish(staged, final):
-            generate_bodies(args, staged, shown=final)
-
-    gen.run(gen.Request(**fields, sampler=sampler, finish=finish))
+    # --body-model: the model is read before any generation; bodies, .glb and meshes are written
+    # into the staged sample folders (docs/bodies.md)
+    gen.run(gen.Request(**fields, sampler=sampler, finish=body_finisher(args)))
     return 0
 
 

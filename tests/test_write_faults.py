@@ -279,6 +279,7 @@ def test_generate_with_bodies_on_a_full_disk_leaves_no_sample_and_then_works(run
     missing = run_command([*command[:-1], models / "SMPLX_FEMALE.npz"], cwd)
     assert missing.returncode == 2 and "SMPLX_FEMALE.npz" in missing.stderr, missing.stderr
     assert sorted(p.name for p in cwd.iterdir()) == []  # a missing body model: no folder either
+    assert missing.stdout == ""  # ... and it is found missing before anything is generated
     done = run_command(command, cwd)
     assert done.returncode == 0, done.stderr
     for folder in sorted((cwd / "out").iterdir()):

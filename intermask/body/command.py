@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from intermask.body.fit import FitSettings
@@ -68,27 +68,36 @@ def write_bodies(
     settings: FitSettings | None = None,
     viewer: bool = True,
     shown: Sequence[Path] | None = None,
+    model: Any = None,
 ) -> None:
     """Body files for each sample folder (intermask.body.sample.body_outputs), one line each
-    naming the folder (or its entry of ``shown``)."""
-    from intermask.body.model import load_body_model
+    naming the folder (or its entry of ``shown``); ``model``: a body model already read (else
+    ``body_model`` is read)."""
     from intermask.body.sample import body_outputs
 
-    model = None
-    if body_model is not None:
-        import torch
-
-        model = load_body_model(
-            body_model,
-            kind=kind,
-            gender=gender,
-            num_betas=betas,
-            device=device,
-            dtype=torch.float64 if device == "cpu" else torch.float32,
-        )
+    if model is None and body_model is not None:
+        model = read_body_model(body_model, kind=kind, gender=gender, betas=betas, device=device)
     for folder, name in zip(folders, shown or folders, strict=True):
         paths = body_outputs(folder, model, settings=settings, viewer=viewer)
         print(f"{name}: {', '.join(path.name for path in paths.values())}")
+
+
+def read_body_model(
+    path: Path, *, kind: str | None, gender: str | None, betas: int, device: str
+) -> Any:
+    """The body model of ``path`` for fitting on ``device`` (float64 on a CPU)."""
+    import torch
+
+    from intermask.body.model import load_body_model
+
+    return load_body_model(
+        path,
+        kind=kind,
+        gender=gender,
+        num_betas=betas,
+        device=device,
+        dtype=torch.float64 if device == "cpu" else torch.float32,
+    )
 
 
 def run_body(args: argparse.Namespace) -> int:
@@ -120,22 +129,38 @@ def add_generate_body_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--body-gender", choices=GENDERS, help="default: the file's")
 
 
+def body_finisher(
+    args: argparse.Namespace,
+) -> Callable[[Sequence[Path], Sequence[Path]], None] | None:
+    """``intermask generate --body-model``: the body model read, and so checked, before any
+    generation, and the step that writes the bodies into the staged sample folders
+    (``Request.finish``); None without --body-model."""
+    if getattr(args, "body_model", None) is None:
+        return None
+    device = getattr(args, "device", None) or "cpu"
+    model = read_body_model(
+        args.body_model,
+        kind=args.body_model_type,
+        gender=args.body_gender,
+        betas=DEFAULT_BETAS,
+        device=device,
+    )
+    viewer = not getattr(args, "no_render", False)
+
+    def finish(staged: Sequence[Path], final: Sequence[Path]) -> None:
+        write_bodies(staged, body_model=None, model=model, viewer=viewer, shown=final)
+
+    return finish
+
+
 def generate_bodies(
     args: argparse.Namespace, folders: Sequence[Path], *, shown: Sequence[Path] | None = None
 ) -> None:
-    """``intermask generate``: the bodies of its sample folders when --body-model is given
-    (``shown``: the names printed for ``folders``, the places a staged write moves them to)."""
-    if getattr(args, "body_model", None) is not None:
-        device = getattr(args, "device", None) or "cpu"
-        write_bodies(
-            folders,
-            body_model=args.body_model,
-            kind=args.body_model_type,
-            gender=args.body_gender,
-            device=device,
-            viewer=not getattr(args, "no_render", False),
-            shown=shown,
-        )
+    """The bodies of sample folders as ``intermask generate --body-model`` writes them
+    (``shown``: the names printed for ``folders``); nothing without --body-model."""
+    finish = body_finisher(args)
+    if finish is not None:
+        finish(folders, shown or folders)
 
 
 def add_body_parser(commands) -> None:
