@@ -353,12 +353,6 @@ def _add_decoding_options(parser: argparse.ArgumentParser) -> tuple[str, ...]:
             f"transformer's, {momask['mask_cfg_scale']:g})",
         ),
         add(
-            "--residual-cfg-scale",
-            type=_non_negative_float,
-            help=f"MoMask: the residual transformer's guidance scale "
-            f"({momask['residual_cfg_scale']:g})",
-        ),
-        add(
             "--iterations",
             type=_positive_int,
             help=f"decoding iterations ({paper['iterations']}; reaction "
@@ -412,14 +406,27 @@ def _add_decoding_options(parser: argparse.ArgumentParser) -> tuple[str, ...]:
             type=_positive_float,
             help=f"sampling temperature ({paper['temperature']:g})",
         ),
-        add(
+        *_add_residual_options(parser, momask),
+    ]
+    return tuple(option.dest for option in options)
+
+
+def _add_residual_options(parser: argparse.ArgumentParser, momask: dict) -> list[argparse.Action]:
+    """MoMask's residual-layer decoding options (configs/sampler/momask.yaml gives the values)."""
+    return [
+        parser.add_argument(
+            "--residual-cfg-scale",
+            type=_non_negative_float,
+            help=f"MoMask: the residual transformer's guidance scale "
+            f"({momask['residual_cfg_scale']:g})",
+        ),
+        parser.add_argument(
             "--residual-temperature",
             type=_non_negative_float,
             help="MoMask: the residual layers' sampling temperature, 0 greedy "
             f"({momask['residual_temperature']:g})",
         ),
     ]
-    return tuple(option.dest for option in options)
 
 
 def build_parser() -> argparse.ArgumentParser:
