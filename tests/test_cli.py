@@ -92,6 +92,16 @@ def test_the_generate_help_gives_the_values_of_the_configs(monkeypatch, tmp_path
         return " ".join(commands.choices["generate"].format_help().split())
 
     shipped = generate_help()
+    # as a user reads it: the console script in a fresh process, from another folder
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(sys.executable).parent / "intermask"
+    done = subprocess.run(
+        [str(script), "generate", "--help"], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert done.returncode == 0 and " ".join(done.stdout.split()) == shipped
     for text in (
         "length in seconds (default 4)",
         "samples per forward batch (32)",

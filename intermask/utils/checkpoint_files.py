@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import pickle
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -48,24 +49,37 @@ def _process_alive(pid: int) -> bool:
     return True
 
 
-def atomic_torch_save(payload: Any, path: str | Path) -> None:
-    """``torch.save`` that replaces ``path`` atomically (temporary file in the same folder)."""
+def write_atomically(path: str | Path, write: Callable[[Path], object]) -> Path:
+    """``write(temporary)`` into a temporary file beside ``path``, then rename it over ``path``:
+    ``path`` holds the old content or the new, whole. On failure the temporary file is removed
+    and a write error names ``path`` (a full disk surfaces as torch's RuntimeError over the
+    OSError, which names no file or the temporary one)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_name(f".{path.name}.{os.getpid()}{TEMPORARY_SUFFIX}")
     try:
-        with temporary.open("wb") as handle:
-            torch.save(payload, handle)
-            handle.flush()
-            os.fsync(handle.fileno())
+        write(temporary)
         os.replace(temporary, path)
     except BaseException as error:
         temporary.unlink(missing_ok=True)
-        # a full disk surfaces as torch's RuntimeError over the OSError: name the checkpoint
         found = write_error_in(error)
         if found is not None and found.filename in (None, str(temporary)):
             found.filename = str(path)
         raise
+    return path
+
+
+def atomic_torch_save(payload: Any, path: str | Path) -> None:
+    """``torch.save`` that replaces ``path`` atomically (:func:`write_atomically`), synced to
+    the disk with its folder entry."""
+
+    def save(temporary: Path) -> None:
+        with temporary.open("wb") as handle:
+            torch.save(payload, handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+
+    path = write_atomically(path, save)
     _fsync_folder(path.parent)
     # what writers killed mid-write left behind (a SIGKILL runs no cleanup); a file of a
     # process that still runs here is left alone

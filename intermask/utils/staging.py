@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from intermask.utils.checkpoint_files import TEMPORARY_SUFFIX
+from intermask.utils.checkpoint_files import TEMPORARY_SUFFIX, write_atomically
 from intermask.utils.write_errors import name_destination, write_error_in
 
 REPLACED = ".replaced"  # inside the staging folder: what ``replace`` moved aside
@@ -102,25 +102,6 @@ def _remove(path: Path) -> None:
         shutil.rmtree(path, ignore_errors=True)
     else:
         path.unlink(missing_ok=True)
-
-
-def write_atomically(path: str | Path, write: Callable[[Path], object]) -> Path:
-    """``write(temporary)`` into a temporary file beside ``path``, then rename it over ``path``:
-    ``path`` holds the old content or the new, whole. On failure the temporary file is removed
-    and a write error names ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}{TEMPORARY_SUFFIX}")
-    try:
-        write(temporary)
-        os.replace(temporary, path)
-    except BaseException as error:
-        temporary.unlink(missing_ok=True)
-        found = write_error_in(error)
-        if found is not None and found.filename in (None, str(temporary)):
-            found.filename = str(path)
-        raise
-    return path
 
 
 def write_text_atomically(path: str | Path, text: str) -> Path:
