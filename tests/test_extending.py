@@ -59,6 +59,7 @@ def _clone_after_demo(project: Path) -> None:
     from intermask.train import train
 
     project.mkdir()
+    assert (REPO / ".venv").is_dir(), "no .venv beside the Makefile: run make install first"
     for name in CLONE_FILES:
         (project / name).symlink_to(REPO / name)
     data = project / "data" / "synthetic" / "interhuman"
