@@ -76,14 +76,18 @@ def build_sources(
     return sources, checkpoints
 
 
+def own_row_keys(cfg: DictConfig) -> list[str]:
+    """The keys of ``rows`` that are switched on (``rows.<key>=null`` leaves one out)."""
+    return [key for key, spec in (cfg.get("rows") or {}).items() if spec is not None]
+
+
 def user_rows(cfg: DictConfig, normalizer, device: torch.device, checkpoints) -> list[MotionSource]:
     """``rows``: rows of your own (docs/extending.md), each built by its config's ``_target_``
     with ``device`` (the evaluation's) and ``normalizer`` (the dataset's, or None); its
     resolved config goes into the results' header as ``rows.<key>``."""
     rows: list[MotionSource] = []
-    for key, spec in (cfg.get("rows") or {}).items():
-        if spec is None:  # switched off: rows.<key>=null
-            continue
+    for key in own_row_keys(cfg):
+        spec = cfg.rows[key]
         if not isinstance(spec, DictConfig) or "_target_" not in spec:
             raise ValueError(
                 f"rows.{key}: expected a config with a _target_ (the function or class that "
@@ -107,7 +111,7 @@ def _builtin_sources(
     only ``rows`` of your own are given."""
     from intermask.vq.load import load_vq
 
-    own_rows = any(spec is not None for spec in (cfg.get("rows") or {}).values())
+    own_rows = bool(own_row_keys(cfg))
     single_person = cfg.data.dataset in SINGLE_PERSON
     if single_person and cfg.mode not in ("text_to_motion", "reconstruction"):
         raise ValueError(
@@ -309,7 +313,7 @@ def _check_config(cfg: DictConfig) -> str:
     order = cfg.get("order", "batched")
     if order not in ORDERS:
         raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
-    own_rows = sorted(key for key, spec in (cfg.get("rows") or {}).items() if spec is not None)
+    own_rows = own_row_keys(cfg)
     if order == "reference" and (cfg.mode != "interaction" or cfg.reconstruction_row or own_rows):
         raise ValueError(
             "order=reference replays the authors' eval.py loop: mode=interaction without "

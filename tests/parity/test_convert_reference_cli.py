@@ -12,24 +12,12 @@ from pathlib import Path
 
 import pytest
 import torch
-from fixtures_io import build_state, load_fixture
-from intermask_release import CASES, _generator_options, write_release
+from fixtures_io import load_fixture
+from intermask_release import _generator_options, write_release
 
 from intermask.convert import convert_reference
 
 CONSOLE = Path(sys.executable).parent / "intermask"
-
-
-@pytest.fixture(scope="module")
-def release(tmp_path_factory) -> dict[str, Path]:
-    """An Inter-X release: the tokenizer and the 6-head generator of the parity fixture."""
-    fixture = load_fixture("intermask_models")
-    root = tmp_path_factory.mktemp("release") / "checkpoints" / "interx"
-    paths = {}
-    for name, entry in (("vq_interx", "vq_model"), ("generator", "t2m_transformer")):
-        state = build_state(fixture[name]["recipe"], seed=fixture["seed"])
-        paths[name] = write_release(root / name, entry, state, CASES[name]["options"])
-    return paths
 
 
 def _convert(cwd: Path, *args: str) -> subprocess.CompletedProcess:
